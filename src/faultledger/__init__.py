@@ -1,0 +1,28 @@
+"""faultledger: an event-sourced fault manager for ROS 2 robots with a verifiable fault log."""
+
+from faultledger.domain.events import LogRecord
+from faultledger.domain.fault import Fault
+from faultledger.domain.notifications import Notification
+from faultledger.domain.policy import Policy
+from faultledger.domain.types import EventType, FaultStatus, NotificationType, Severity
+from faultledger.errors import FaultLedgerError
+from faultledger.service.ledger import FaultLedger, Subscription
+from faultledger.service.results import ClearResult, FaultLookup, ReportResult, VerifyReport
+
+__all__ = [
+    "ClearResult",
+    "EventType",
+    "Fault",
+    "FaultLedger",
+    "FaultLedgerError",
+    "FaultLookup",
+    "FaultStatus",
+    "LogRecord",
+    "Notification",
+    "NotificationType",
+    "Policy",
+    "ReportResult",
+    "Severity",
+    "Subscription",
+    "VerifyReport",
+]

@@ -1,0 +1,203 @@
+"""The fold of log records into fault state, status transitions and announcements."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, replace
+
+from faultledger.domain import debounce
+from faultledger.domain.events import (
+    FaultCleared,
+    FaultConfirmedByTimer,
+    FaultReported,
+    LogRecord,
+    PolicyChanged,
+    ReclassifiedOnStartup,
+)
+from faultledger.domain.fault import Fault
+from faultledger.domain.notifications import for_status_change
+from faultledger.domain.policy import Policy
+from faultledger.domain.types import FaultStatus, NotificationType
+
+
+@dataclass(frozen=True, slots=True)
+class Transition:
+    """A status change of one fault, caused by the record ``seq`` (from_status None: created)."""
+
+    seq: int
+    fault_code: str
+    from_status: FaultStatus | None
+    to_status: FaultStatus
+    at_ns: int
+    cause: str
+    source_id: str
+
+
+@dataclass(frozen=True, slots=True)
+class Effect:
+    """What one record did: the fault after it (None: untouched), and its announcement."""
+
+    fault: Fault | None = None
+    transition: Transition | None = None
+    notification: NotificationType | None = None
+
+
+_NOTHING = Effect()
+
+
+class Projector:
+    """Fault state after the records applied so far; deterministic: it reads only the records.
+
+    ``stage()`` starts a group of applications that ``commit()`` keeps or ``rollback()`` undoes,
+    so a failed database commit leaves the in-memory state as it was.
+    """
+
+    def __init__(
+        self,
+        faults: Mapping[str, Fault] | None = None,
+        policy: Policy | None = None,
+        seq: int = 0,
+        policy_recorded: bool = False,
+    ) -> None:
+        self._faults: dict[str, Fault] = dict(faults or {})
+        self._staged: dict[str, Fault] | None = None
+        self._saved: tuple[Policy, int, bool] | None = None
+        self.policy = policy or Policy()
+        self.policy_recorded = policy_recorded
+        self.seq = seq
+
+    # -- reading -----------------------------------------------------------------------------
+    def get(self, fault_code: str) -> Fault | None:
+        if self._staged is not None:
+            staged = self._staged.get(fault_code)
+            if staged is not None:
+                return staged
+        return self._faults.get(fault_code)
+
+    def get_committed(self, fault_code: str) -> Fault | None:
+        return self._faults.get(fault_code)
+
+    def committed(self) -> list[Fault]:
+        """Snapshot of committed faults (safe to call from another thread)."""
+        return list(self._faults.values())
+
+    def snapshot(self) -> dict[str, Fault]:
+        merged = dict(self._faults)
+        if self._staged:
+            merged.update(self._staged)
+        return merged
+
+    def overdue_for_timer(self, now_ns: int) -> list[str]:
+        after = self.policy.auto_confirm_after_sec
+        return sorted(
+            code
+            for code, fault in self.snapshot().items()
+            if debounce.is_overdue(fault, after, now_ns)
+        )
+
+    def to_reclassify(self, policy: Policy) -> list[str]:
+        return sorted(
+            code
+            for code, fault in self.snapshot().items()
+            if debounce.reclassify_on_startup(fault, policy)
+        )
+
+    # -- staging -----------------------------------------------------------------------------
+    def stage(self) -> None:
+        self._staged = {}
+        self._saved = (self.policy, self.seq, self.policy_recorded)
+
+    def staged_faults(self) -> list[Fault]:
+        return list((self._staged or {}).values())
+
+    def commit(self) -> None:
+        if self._staged:
+            self._faults.update(self._staged)
+        self._staged = None
+        self._saved = None
+
+    def rollback(self) -> None:
+        if self._saved is not None:
+            self.policy, self.seq, self.policy_recorded = self._saved
+        self._staged = None
+        self._saved = None
+
+    def _put(self, fault: Fault) -> None:
+        if self._staged is not None:
+            self._staged[fault.fault_code] = fault
+        else:
+            self._faults[fault.fault_code] = fault
+
+    # -- applying ----------------------------------------------------------------------------
+    def apply_all(self, records: Iterable[LogRecord]) -> int:
+        count = 0
+        for record in records:
+            self.apply(record)
+            count += 1
+        return count
+
+    def apply(self, record: LogRecord) -> Effect:
+        if record.seq != self.seq + 1:
+            raise ValueError(f"record seq {record.seq} does not follow {self.seq}")
+        self.seq = record.seq
+        event = record.event
+        if isinstance(event, FaultReported):
+            return self._reported(record, event)
+        if isinstance(event, FaultCleared):
+            return self._cleared(record, event)
+        if isinstance(event, FaultConfirmedByTimer):
+            return self._move(record, event.fault_code, FaultStatus.PREFAILED, "timer", "timer")
+        if isinstance(event, ReclassifiedOnStartup):
+            return self._move(record, event.fault_code, FaultStatus.HEALED, "startup", "startup")
+        if isinstance(event, PolicyChanged):
+            self.policy = Policy.model_validate(event.policy)
+            self.policy_recorded = True
+        return _NOTHING
+
+    def _reported(self, record: LogRecord, event: FaultReported) -> Effect:
+        old = self.get(event.fault_code)
+        params = self.policy.resolve(event.source_id)
+        new = debounce.apply_report(old, event, params, record.occurred_at_ns)
+        if new is None or new is old:
+            return _NOTHING
+        self._put(new)
+        old_status = None if old is None else old.status
+        return Effect(
+            new,
+            self._transition(record, new, old_status, event.event_type.name, event.source_id),
+            for_status_change(old_status, new.status),
+        )
+
+    def _cleared(self, record: LogRecord, event: FaultCleared) -> Effect:
+        old = self.get(event.fault_code)
+        if old is None:
+            return _NOTHING
+        new = replace(old, status=FaultStatus.CLEARED, last_report_failed=False)
+        self._put(new)
+        transition = self._transition(record, new, old.status, "clear", event.actor)
+        return Effect(new, transition, NotificationType.CLEARED)
+
+    def _move(
+        self, record: LogRecord, code: str, required: FaultStatus, cause: str, source: str
+    ) -> Effect:
+        """Timer confirmation (PREFAILED→CONFIRMED) or startup reclassification (HEALED→CLEARED)."""
+        old = self.get(code)
+        if old is None or old.status is not required:
+            return _NOTHING
+        if required is FaultStatus.PREFAILED:
+            new = replace(old, status=FaultStatus.CONFIRMED)
+            notification = NotificationType.CONFIRMED
+        else:
+            new = replace(old, status=FaultStatus.CLEARED, last_report_failed=False)
+            notification = None
+        self._put(new)
+        return Effect(new, self._transition(record, new, old.status, cause, source), notification)
+
+    @staticmethod
+    def _transition(
+        record: LogRecord, new: Fault, old: FaultStatus | None, cause: str, source: str
+    ) -> Transition | None:
+        if old is new.status:
+            return None
+        return Transition(record.seq, new.fault_code, old, new.status, record.occurred_at_ns,
+                          cause, source)

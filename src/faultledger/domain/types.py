@@ -1,0 +1,33 @@
+"""The small vocabularies shared by every layer: statuses, severities, report types."""
+
+from __future__ import annotations
+
+from enum import IntEnum, StrEnum
+
+
+class FaultStatus(StrEnum):
+    PREFAILED = "PREFAILED"
+    PREPASSED = "PREPASSED"
+    CONFIRMED = "CONFIRMED"
+    HEALED = "HEALED"
+    CLEARED = "CLEARED"
+
+
+class Severity(IntEnum):
+    INFO = 0
+    WARN = 1
+    ERROR = 2
+    CRITICAL = 3
+
+
+class EventType(IntEnum):
+    """What a reporter says about a fault; the values are the ROS wire values."""
+
+    FAILED = 0
+    PASSED = 1
+
+
+class NotificationType(StrEnum):
+    CONFIRMED = "fault_confirmed"
+    UPDATED = "fault_updated"
+    CLEARED = "fault_cleared"

@@ -1,0 +1,1 @@
+"""The application API: validate, append durably, project, notify (SPEC §6)."""

@@ -1,0 +1,54 @@
+"""The YAML configuration file, validated with pydantic into clear, located error messages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from faultledger.domain.policy import Policy
+from faultledger.errors import ConfigError
+
+DEFAULT_DATABASE_URL = "sqlite:///var/faultledger.db"
+
+
+class DatabaseSettings(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    url: str = DEFAULT_DATABASE_URL
+    max_batch: int = Field(default=512, ge=1, le=100_000)
+    """Most reports one group commit may carry."""
+
+
+class Settings(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    database: DatabaseSettings = Field(default_factory=DatabaseSettings)
+    policy: Policy = Field(default_factory=Policy)
+
+
+def load_settings(path: Path | None) -> Settings:
+    """Settings from a YAML file, or the built-in defaults when no file is given."""
+    if path is None:
+        return Settings()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise ConfigError(f"cannot read config file {path}: {error}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        raise ConfigError(f"config file {path} is not valid YAML: {error}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"config file {path} must contain a mapping at the top level")
+    try:
+        return Settings.model_validate(data)
+    except ValidationError as error:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}"
+            for e in error.errors()
+        )
+        raise ConfigError(f"config file {path} is invalid: {problems}") from None

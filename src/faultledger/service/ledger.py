@@ -1,0 +1,391 @@
+"""FaultLedger: the one API that the CLI, the ROS node and the HTTP server call (SPEC §6)."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from datetime import datetime
+from types import TracebackType
+
+from sqlalchemy import Connection
+
+from faultledger.domain import queries, validation
+from faultledger.domain.clock import to_ns
+from faultledger.domain.events import FaultCleared, FaultReported, LogRecord
+from faultledger.domain.fault import Fault
+from faultledger.domain.notifications import Notification
+from faultledger.domain.policy import Policy
+from faultledger.domain.projector import Projector, Transition
+from faultledger.errors import FaultLedgerError, InvalidInputError
+from faultledger.service.results import ClearResult, FaultLookup, ReportResult, VerifyReport
+from faultledger.service.writer import (
+    CatchUp,
+    Clear,
+    ConfirmOverdue,
+    Exclusive,
+    ReclassifyHealed,
+    RecordPolicy,
+    Report,
+    Writer,
+)
+from faultledger.store import event_log, migrate, projections
+from faultledger.store.database import Database
+
+log = logging.getLogger(__name__)
+
+Callback = Callable[[Notification], None]
+
+
+@dataclass(frozen=True, slots=True)
+class Restored:
+    """What ``open`` found: the numbers a fault manager prints at startup."""
+
+    events: int
+    faults: int
+    replayed: int
+
+
+class Subscription:
+    def __init__(self, ledger: FaultLedger, callback: Callback) -> None:
+        self._ledger = ledger
+        self.callback = callback
+
+    def cancel(self) -> None:
+        self._ledger._unsubscribe(self)
+
+
+class FaultLedger:
+    """Event-sourced fault manager over one database. Thread-safe; use ``open`` to create."""
+
+    def __init__(self, db: Database, projector: Projector, policy: Policy | None,
+                 max_batch: int, restored: Restored) -> None:
+        self._db = db
+        self._subscriptions: list[Subscription] = []
+        self._subscriptions_lock = threading.Lock()
+        self._writer = Writer(db, projector, policy, self._announce, max_batch)
+        self.restored = restored
+        self._stop = threading.Event()
+        self._ticker: threading.Thread | None = None
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    @classmethod
+    def open(cls, url: str, policy: Policy | None = None, *, max_batch: int = 512,
+             upgrade: bool = True, background: bool | None = None) -> FaultLedger:
+        """Open (create, migrate) the database and restore state: projections + log tail.
+
+        With a ``policy`` this process is a serving writer: the policy is recorded when it
+        differs from the log's, HEALED faults it cannot heal become CLEARED, and a background
+        thread runs time-based confirmation. Without one, the log's own policy applies and
+        opening writes nothing.
+        """
+        db = Database(url)
+        try:
+            migrate.ensure_current(db, upgrade=upgrade)
+            projector, restored = _restore(db)
+        except BaseException:
+            db.dispose()
+            raise
+        ledger = cls(db, projector, policy, max_batch, restored)
+        try:
+            if policy is not None:
+                ledger._writer.submit(RecordPolicy())
+                ledger._writer.submit(ReclassifyHealed(policy))
+            if background if background is not None else policy is not None:
+                ledger._start_ticker()
+        except BaseException:
+            ledger.close()
+            raise
+        return ledger
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._ticker is not None:
+            self._ticker.join()
+        self._writer.close()
+        self._db.dispose()
+
+    def __enter__(self) -> FaultLedger:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    @property
+    def url(self) -> str:
+        return self._db.url
+
+    @property
+    def policy(self) -> Policy:
+        """The policy in force: the last one recorded in the log (or the default)."""
+        return self._writer.projector.policy
+
+    @property
+    def last_seq(self) -> int:
+        return self._writer.projector.seq
+
+    # -- writes ----------------------------------------------------------------------------------
+    def report(self, fault_code: str, event_type: str | int, severity: int = 0,
+               description: str = "", source_id: str = "", at: datetime | None = None,
+               event_id: str | None = None) -> ReportResult:
+        """Record one FAILED/PASSED report; returns once it is durable (or rejected)."""
+        kind = validation.parse_event_type(event_type)
+        problem = validation.report_error(fault_code, event_type, severity, description,
+                                          source_id)
+        if problem is None and event_id is not None:
+            problem = _event_id_error(event_id)
+        try:
+            occurred_ns = time.time_ns() if at is None else to_ns(at)
+        except (ValueError, TypeError, AttributeError):
+            problem = problem or "at must be a timezone-aware datetime"
+            occurred_ns = 0
+        if problem is not None or kind is None:
+            return ReportResult(False, problem or "invalid report")
+        event = FaultReported(fault_code, kind, severity, description, source_id)
+        command = Report(event, occurred_ns, event_id or str(uuid.uuid4()), event_id is not None)
+        try:
+            result: ReportResult = self._writer.submit(command)
+        except FaultLedgerError as error:
+            return ReportResult(False, str(error))
+        return result
+
+    def clear(self, fault_code: str, actor: str = "api", reason: str = "",
+              at: datetime | None = None) -> ClearResult:
+        problem = validation.clear_error(fault_code, actor, reason)
+        if problem is not None:
+            return ClearResult(False, problem)
+        try:
+            occurred_ns = time.time_ns() if at is None else to_ns(at)
+            result: ClearResult = self._writer.submit(
+                Clear(FaultCleared(fault_code, actor, reason), occurred_ns))
+        except ValueError:
+            return ClearResult(False, "at must be a timezone-aware datetime")
+        except FaultLedgerError as error:
+            return ClearResult(False, str(error))
+        return result
+
+    def run_timers(self, now: datetime | None = None) -> int:
+        """Confirm PREFAILED faults whose last FAILED is ``auto_confirm_after_sec`` old."""
+        now_ns = time.time_ns() if now is None else to_ns(now)
+        count: int = self._writer.submit(ConfirmOverdue(now_ns))
+        return count
+
+    def rebuild(self) -> int:
+        """Drop the projections and replay the whole log; returns the records replayed."""
+
+        def action(conn: Connection, writer: Writer) -> int:
+            projector, replayed = _replay(conn)
+            projections.replace_all(conn, projector.committed(), replayed,
+                                    projections.Checkpoint(*event_log.head(conn)))
+            writer.projector = projector
+            return projector.seq
+
+        count: int = self._writer.submit(Exclusive(action))
+        return count
+
+    # -- reads -----------------------------------------------------------------------------------
+    def _faults(self) -> list[Fault]:
+        return self._writer.projector.committed()
+
+    def list_faults(self, statuses: Iterable[str] = (), severity: int | None = None
+                    ) -> list[Fault]:
+        return queries.select(self._faults(), statuses, severity)
+
+    def all_faults(self) -> list[Fault]:
+        return sorted(self._faults(), key=lambda f: f.fault_code)
+
+    def lookup_fault(self, fault_code: str) -> FaultLookup:
+        problem = validation.fault_code_error(fault_code)
+        if problem is not None:
+            return FaultLookup(False, problem)
+        fault = self._writer.projector.get_committed(fault_code)
+        if fault is None:
+            return FaultLookup(False, f"Fault not found: {fault_code}")
+        return FaultLookup(True, "", fault)
+
+    def get_fault(self, fault_code: str) -> Fault | None:
+        problem = validation.fault_code_error(fault_code)
+        if problem is not None:
+            raise InvalidInputError(problem)
+        return self._writer.projector.get_committed(fault_code)
+
+    def list_faults_for_entity(self, entity_id: str) -> list[Fault]:
+        return queries.for_entity(self._faults(), entity_id)
+
+    def history(self, code: str | None = None, since: datetime | None = None,
+                until: datetime | None = None, source: str | None = None,
+                kinds: Iterable[str] = (), limit: int | None = None) -> list[LogRecord]:
+        """Log records in seq order; ``since``/``until`` bound ``occurred_at`` as [since, until)."""
+        where = event_log.RecordFilter(
+            fault_code=code, source_id=source,
+            since_ns=None if since is None else to_ns(since),
+            until_ns=None if until is None else to_ns(until),
+            kinds=tuple(kinds), limit=limit,
+        )
+        with self._db.reading() as conn:
+            return event_log.find(conn, where)
+
+    def transitions(self, code: str | None = None) -> list[Transition]:
+        with self._db.reading() as conn:
+            return projections.load_transitions(conn, code)
+
+    def state_at(self, when: datetime | int) -> list[Fault]:
+        """Faults (any status) after the log prefix up to seq ``when``, or recorded by a time."""
+        with self._db.reading() as conn:
+            upto = when if isinstance(when, int) else event_log.last_seq_recorded_by(
+                conn, to_ns(when))
+            projector = Projector()
+            projector.apply_all(event_log.read(conn, upto_seq=upto))
+        return sorted(projector.committed(), key=lambda f: f.fault_code)
+
+    def verify(self) -> VerifyReport:
+        """Hash chain intact, head anchored, persisted projections equal to a full replay."""
+        with self._db.reading() as conn:
+            chain = event_log.check_chain(conn)
+            checkpoint = projections.load_checkpoint(conn)
+            problems = [chain.problem] if chain.problem else []
+            first_bad = chain.first_bad_seq
+            if chain.problem is None:
+                if checkpoint.seq > chain.head_seq:
+                    first_bad = chain.head_seq + 1
+                    problems.append(
+                        f"the log ends at seq {chain.head_seq} but the projections include seq "
+                        f"{checkpoint.seq}: records {chain.head_seq + 1}..{checkpoint.seq} were "
+                        "deleted")
+                elif checkpoint.seq == chain.head_seq and checkpoint.hash != chain.head_hash:
+                    first_bad = chain.head_seq
+                    problems.append(f"record {chain.head_seq} differs from the recorded head")
+            if not problems:
+                problems.extend(_projection_problems(conn, checkpoint.seq))
+        return VerifyReport(not problems, chain.records, chain.head_seq, chain.head_hash,
+                            first_bad, problems)
+
+    # -- notifications ---------------------------------------------------------------------------
+    def subscribe(self, callback: Callback) -> Subscription:
+        """Call ``callback(notification)`` after each announced change is durable.
+
+        Callbacks run on the writer thread, in log order, before the report is answered:
+        keep them short (hand heavy work to a queue).
+        """
+        subscription = Subscription(self, callback)
+        with self._subscriptions_lock:
+            self._subscriptions.append(subscription)
+        return subscription
+
+    def _unsubscribe(self, subscription: Subscription) -> None:
+        with self._subscriptions_lock:
+            if subscription in self._subscriptions:
+                self._subscriptions.remove(subscription)
+
+    def _announce(self, notifications: list[Notification]) -> None:
+        with self._subscriptions_lock:
+            subscriptions = list(self._subscriptions)
+        for notification in notifications:
+            for subscription in subscriptions:
+                try:
+                    subscription.callback(notification)
+                except Exception:
+                    log.exception("subscriber %r failed", subscription.callback)
+
+    # -- background ------------------------------------------------------------------------------
+    def _start_ticker(self) -> None:
+        self._ticker = threading.Thread(target=self._tick, name="faultledger-timers",
+                                        daemon=True)
+        self._ticker.start()
+
+    def _tick(self) -> None:
+        """Time-based confirmation and pick-up of records other processes appended."""
+        while not self._stop.wait(self._tick_interval()):
+            try:
+                with self._db.reading() as conn:
+                    stored = event_log.head(conn)[0]
+                if stored != self.last_seq:
+                    self._writer.submit(CatchUp())
+                if self.policy.auto_confirm_after_sec > 0:
+                    self._writer.submit(ConfirmOverdue(time.time_ns()))
+            except FaultLedgerError as error:
+                log.warning("background check failed: %s", error)
+
+    def _tick_interval(self) -> float:
+        after = self.policy.auto_confirm_after_sec
+        return 1.0 if after <= 0 else min(1.0, max(0.05, after / 10))
+
+
+def _event_id_error(event_id: str) -> str | None:
+    try:
+        uuid.UUID(event_id)
+    except (ValueError, TypeError, AttributeError):
+        return f"event_id must be a UUID, got {event_id!r}"
+    return None
+
+
+def _replay(conn: Connection, upto: int | None = None) -> tuple[Projector, list[Transition]]:
+    projector = Projector()
+    found: list[Transition] = []
+    for record in event_log.read(conn, upto_seq=upto):
+        effect = projector.apply(record)
+        if effect.transition is not None:
+            found.append(effect.transition)
+    return projector, found
+
+
+def _restore(db: Database) -> tuple[Projector, Restored]:
+    """Persisted projections plus a replay of the records after their checkpoint."""
+    with db.reading() as conn:
+        checkpoint = projections.load_checkpoint(conn)
+        policy = event_log.last_policy(conn, checkpoint.seq)
+        projector = Projector(
+            projections.load_faults(conn),
+            Policy.model_validate(policy.policy) if policy else None,
+            checkpoint.seq,
+            policy_recorded=policy is not None,
+        )
+        stored_seq = event_log.head(conn)[0]
+    if stored_seq < checkpoint.seq:
+        log.warning("the log ends at seq %d but the projections include seq %d: records were "
+                    "deleted; writes are refused (run `faultledger verify`)",
+                    stored_seq, checkpoint.seq)
+    replayed = max(0, stored_seq - checkpoint.seq)
+    if replayed:
+        projector = _persist_tail(db, projector)
+    faults = len(projector.committed())
+    return projector, Restored(stored_seq, faults, replayed)
+
+
+def _persist_tail(db: Database, projector: Projector) -> Projector:
+    """Bring lagging projections up to the log (in memory, and on disk when writable)."""
+    try:
+        with db.writing() as conn:
+            projector.stage()
+            found: list[Transition] = []
+            for record in event_log.read(conn, after_seq=projector.seq):
+                effect = projector.apply(record)
+                if effect.transition is not None:
+                    found.append(effect.transition)
+            projections.save(conn, projector.staged_faults(), found,
+                             projections.Checkpoint(*event_log.head(conn)))
+        projector.commit()
+    except FaultLedgerError as error:
+        projector.rollback()
+        log.warning("projections lag the log and cannot be saved (%s); replaying in memory",
+                    error)
+        with db.reading() as conn:
+            projector.apply_all(event_log.read(conn, after_seq=projector.seq))
+    return projector
+
+
+def _projection_problems(conn: Connection, upto: int) -> list[str]:
+    expected, expected_transitions = _replay(conn, upto)
+    stored = projections.load_faults(conn)
+    problems: list[str] = []
+    replayed = {f.fault_code: f for f in expected.committed()}
+    for code in sorted(set(stored) | set(replayed)):
+        if stored.get(code) != replayed.get(code):
+            problems.append(f"projection of fault {code} differs from a full replay of the log")
+    if projections.load_transitions(conn) != expected_transitions:
+        problems.append("transitions table differs from a full replay of the log")
+    return problems

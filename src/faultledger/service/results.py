@@ -1,0 +1,42 @@
+"""Answers of the service API: errors are values at this boundary, not exceptions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from faultledger.domain.fault import Fault
+
+
+@dataclass(frozen=True, slots=True)
+class ReportResult:
+    accepted: bool
+    message: str
+    seq: int | None = None
+    event_id: str | None = None
+    duplicate: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ClearResult:
+    success: bool
+    message: str
+    seq: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class FaultLookup:
+    success: bool
+    message: str
+    fault: Fault | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class VerifyReport:
+    """Outcome of ``verify``: chain intact, head anchored, projections equal a full replay."""
+
+    ok: bool
+    records: int
+    head_seq: int
+    head_hash: str
+    first_bad_seq: int | None = None
+    problems: list[str] = field(default_factory=list)

@@ -1,0 +1,316 @@
+"""The single writer: turns queued commands into records and commits them in groups.
+
+Every reporting thread enqueues a command and waits; the writer thread takes everything
+queued (up to ``max_batch``), applies it to the projector, appends the records and the
+changed projections in ONE transaction, and only then answers the waiting callers and
+announces the changes. Many concurrent reports therefore share one fsync (group commit),
+and nothing is acknowledged before it is durable.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from sqlalchemy import Connection
+
+from faultledger.domain import debounce
+from faultledger.domain.events import (
+    DomainEvent,
+    FaultCleared,
+    FaultConfirmedByTimer,
+    FaultReported,
+    LogRecord,
+    PolicyChanged,
+    ReclassifiedOnStartup,
+)
+from faultledger.domain.notifications import Notification
+from faultledger.domain.policy import Policy
+from faultledger.domain.projector import Effect, Projector, Transition
+from faultledger.errors import FaultLedgerError, LedgerClosedError, StoreError
+from faultledger.service.results import ClearResult, ReportResult
+from faultledger.store import event_log, projections
+from faultledger.store.database import Database
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class Report:
+    event: FaultReported
+    occurred_ns: int
+    event_id: str
+    explicit_id: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Clear:
+    event: FaultCleared
+    occurred_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class ConfirmOverdue:
+    now_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class ReclassifyHealed:
+    policy: Policy
+
+
+@dataclass(frozen=True, slots=True)
+class RecordPolicy:
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class CatchUp:
+    """Apply records another process appended (no announcements: that process made them)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Exclusive:
+    """Run ``action(conn, writer)`` alone inside a write transaction (e.g. rebuild)."""
+
+    action: Callable[[Connection, Writer], Any]
+
+
+Command = Report | Clear | ConfirmOverdue | ReclassifyHealed | RecordPolicy | CatchUp | Exclusive
+
+
+@dataclass(slots=True)
+class _Pending:
+    command: Command
+    done: threading.Event = field(default_factory=threading.Event)
+    result: Any = None
+    error: BaseException | None = None
+
+
+_STOP = object()
+
+
+class _Batch:
+    """Records and effects of one group commit, built against the staged projector."""
+
+    def __init__(self, projector: Projector, recorded_ns: int) -> None:
+        self.projector = projector
+        self.recorded_ns = recorded_ns
+        self.records: list[LogRecord] = []
+        self.transitions: list[Transition] = []
+        self.notifications: list[Notification] = []
+
+    def add(self, event: DomainEvent, occurred_ns: int, event_id: str | None = None) -> int:
+        record = LogRecord(
+            seq=self.projector.seq + 1,
+            event_id=event_id or str(uuid.uuid4()),
+            event=event,
+            occurred_at_ns=occurred_ns,
+            recorded_at_ns=self.recorded_ns,
+        )
+        effect: Effect = self.projector.apply(record)
+        self.records.append(record)
+        if effect.transition is not None:
+            self.transitions.append(effect.transition)
+        if effect.notification is not None and effect.fault is not None:
+            self.notifications.append(
+                Notification(effect.notification, effect.fault, self.recorded_ns, record.seq)
+            )
+        return record.seq
+
+
+class Writer:
+    """Owns the projector and the only write path to the log of this process."""
+
+    def __init__(
+        self,
+        db: Database,
+        projector: Projector,
+        desired_policy: Policy | None,
+        announce: Callable[[list[Notification]], None],
+        max_batch: int = 512,
+    ) -> None:
+        self.db = db
+        self.projector = projector
+        self.desired_policy = desired_policy
+        self.max_batch = max_batch
+        self._announce = announce
+        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._closed = False
+        self._close_lock = threading.Lock()
+        self._thread = threading.Thread(target=self._run, name="faultledger-writer", daemon=True)
+        self._thread.start()
+        self.commits = 0
+
+    # -- callers' side -------------------------------------------------------------------------
+    def submit(self, command: Command) -> Any:
+        """Queue a command and wait until it is durable (or failed); returns its result."""
+        pending = _Pending(command)
+        with self._close_lock:
+            if self._closed:
+                raise LedgerClosedError("the ledger is closed")
+            self._queue.put(pending)
+        pending.done.wait()
+        if pending.error is not None:
+            raise pending.error
+        return pending.result
+
+    def close(self) -> None:
+        with self._close_lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._queue.put(_STOP)
+        self._thread.join()
+
+    # -- writer thread -------------------------------------------------------------------------
+    def _run(self) -> None:
+        stop = False
+        while not stop:
+            item = self._queue.get()
+            if item is _STOP:
+                return
+            batch: list[_Pending] = [item]
+            while len(batch) < self.max_batch:
+                try:
+                    item = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if item is _STOP:
+                    stop = True
+                    break
+                batch.append(item)
+            for group in _split_exclusive(batch):
+                self._commit(group)
+
+    def _commit(self, group: list[_Pending]) -> None:
+        projector = self.projector
+        projector.stage()
+        batch = _Batch(projector, time.time_ns())
+        try:
+            with self.db.writing() as conn:
+                stored_seq, head_hash = event_log.head(conn)
+                batch.transitions.extend(self._catch_up(conn, stored_seq))
+                ids = [p.command.event_id for p in group
+                       if isinstance(p.command, Report) and p.command.explicit_id]
+                known = event_log.existing_event_ids(conn, ids)
+                for pending in group:
+                    pending.result = self._build(pending.command, batch, known, conn)
+                if batch.records or batch.transitions:
+                    head_hash = event_log.append(conn, batch.records, head_hash)
+                    projections.save(conn, projector.staged_faults(), batch.transitions,
+                                     projections.Checkpoint(projector.seq, head_hash))
+        except FaultLedgerError as error:
+            projector.rollback()
+            self._fail(group, error)
+            return
+        except Exception as error:  # a bug must not kill the writer thread
+            log.exception("writer failed on a batch of %d commands", len(group))
+            projector.rollback()
+            self._fail(group, StoreError(f"internal error while writing: {error!r}"))
+            return
+        projector.commit()
+        self.commits += 1
+        if batch.notifications:
+            self._announce(batch.notifications)
+        for pending in group:
+            pending.done.set()
+
+    @staticmethod
+    def _fail(group: list[_Pending], error: FaultLedgerError) -> None:
+        for pending in group:
+            if isinstance(pending.command, Report):
+                pending.result = ReportResult(False, str(error))
+            elif isinstance(pending.command, Clear):
+                pending.result = ClearResult(False, str(error))
+            else:
+                pending.error = error
+            pending.done.set()
+
+    def _catch_up(self, conn: Connection, stored_seq: int) -> list[Transition]:
+        projector = self.projector
+        if stored_seq < projector.seq:
+            raise StoreError(
+                f"the log ends at seq {stored_seq} but this process has applied {projector.seq}: "
+                "the database was replaced or truncated underneath; restart faultledger"
+            )
+        found: list[Transition] = []
+        for record in event_log.read(conn, after_seq=projector.seq):
+            effect = projector.apply(record)
+            if effect.transition is not None:
+                found.append(effect.transition)
+        return found
+
+    def _ensure_policy(self, batch: _Batch) -> None:
+        """Record the effective policy before the first record that depends on it."""
+        projector = self.projector
+        wanted = self.desired_policy or projector.policy
+        if not projector.policy_recorded or projector.policy != wanted:
+            batch.add(PolicyChanged(wanted.to_record()), batch.recorded_ns)
+
+    def _build(self, command: Command, batch: _Batch, known: set[str], conn: Connection) -> Any:
+        projector = self.projector
+        if isinstance(command, Report):
+            return self._report(command, batch, known)
+        if isinstance(command, Clear):
+            code = command.event.fault_code
+            if projector.get(code) is None:
+                return ClearResult(False, f"Fault not found: {code}")
+            self._ensure_policy(batch)
+            seq = batch.add(command.event, command.occurred_ns)
+            return ClearResult(True, f"Fault cleared: {code}", seq)
+        if isinstance(command, ConfirmOverdue):
+            codes = projector.overdue_for_timer(command.now_ns)
+            after = projector.policy.auto_confirm_after_sec
+            for code in codes:
+                batch.add(FaultConfirmedByTimer(code, after), command.now_ns)
+            return len(codes)
+        if isinstance(command, ReclassifyHealed):
+            codes = projector.to_reclassify(command.policy)
+            for code in codes:
+                batch.add(ReclassifiedOnStartup(code, "healing is disabled in the policy"),
+                          batch.recorded_ns)
+            return codes
+        if isinstance(command, RecordPolicy):
+            self._ensure_policy(batch)
+            return projector.policy
+        if isinstance(command, CatchUp):
+            return projector.seq
+        return command.action(conn, self)
+
+    def _report(self, command: Report, batch: _Batch, known: set[str]) -> ReportResult:
+        if command.explicit_id and command.event_id in known:
+            return ReportResult(True, "duplicate: this event_id is already recorded",
+                                event_id=command.event_id, duplicate=True)
+        event = command.event
+        fault = self.projector.get(event.fault_code)
+        if debounce.is_ignored(fault, event):
+            why = "no such fault" if fault is None else "the fault is CLEARED"
+            return ReportResult(True, f"accepted; nothing to record ({why})")
+        self._ensure_policy(batch)
+        seq = batch.add(event, command.occurred_ns, command.event_id)
+        known.add(command.event_id)
+        return ReportResult(True, f"recorded as seq {seq}", seq, command.event_id)
+
+
+def _split_exclusive(batch: list[_Pending]) -> list[list[_Pending]]:
+    """Exclusive commands run in a transaction of their own, in queue order."""
+    groups: list[list[_Pending]] = []
+    current: list[_Pending] = []
+    for pending in batch:
+        if isinstance(pending.command, Exclusive):
+            if current:
+                groups.append(current)
+                current = []
+            groups.append([pending])
+        else:
+            current.append(pending)
+    if current:
+        groups.append(current)
+    return groups

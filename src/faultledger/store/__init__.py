@@ -1,0 +1,1 @@
+"""Persistence: the SQL schema, the append-only event store and the projection tables."""

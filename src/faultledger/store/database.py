@@ -1,0 +1,121 @@
+"""Engine setup (durable SQLite settings) and translation of driver errors into clear ones."""
+
+from __future__ import annotations
+
+import contextlib
+import sqlite3
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import Connection, Engine, create_engine, event, exc
+from sqlalchemy.engine import make_url
+
+from faultledger.errors import (
+    DatabaseFullError,
+    DatabaseLockedError,
+    DatabaseReadOnlyError,
+    NotADatabaseError,
+    StoreError,
+)
+
+BUSY_TIMEOUT_MS = 5_000
+
+
+def _sqlite_file(url: str) -> Path | None:
+    parsed = make_url(url)
+    if parsed.get_backend_name() != "sqlite":
+        return None
+    database = parsed.database or ""
+    if not database or database == ":memory:" or database.startswith("file:"):
+        return None
+    return Path(database)
+
+
+def describe(url: str) -> str:
+    """The URL as shown to an operator (password hidden)."""
+    return make_url(url).render_as_string(hide_password=True)
+
+
+class Database:
+    """One engine per URL. SQLite runs in WAL mode with synchronous=FULL: a commit is on disk.
+
+    Write transactions begin with ``BEGIN IMMEDIATE`` so two writers never deadlock on a
+    lock upgrade; readers use plain ``BEGIN`` and see a consistent snapshot.
+    """
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.path = _sqlite_file(url)
+        if self.path is not None:
+            if self.path.is_dir():
+                raise NotADatabaseError(f"{self.path} is a directory, not a database file")
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self.engine: Engine = create_engine(url)
+        except (exc.ArgumentError, exc.NoSuchModuleError) as error:
+            raise StoreError(f"invalid database URL {url!r}: {error}") from None
+        self.dialect = self.engine.dialect.name
+        if self.dialect == "sqlite":
+            event.listen(self.engine, "connect", _sqlite_connect)
+            event.listen(self.engine, "begin", _sqlite_begin)
+
+    @contextlib.contextmanager
+    def reading(self) -> Iterator[Connection]:
+        with translate_errors(self.url), self.engine.connect() as conn, conn.begin():
+            yield conn
+
+    @contextlib.contextmanager
+    def writing(self) -> Iterator[Connection]:
+        with translate_errors(self.url), self.engine.connect() as raw:
+            conn = raw.execution_options(faultledger_write=True)
+            with conn.begin():
+                yield conn
+
+    def dispose(self) -> None:
+        self.engine.dispose()
+
+
+def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
+    dbapi_connection.isolation_level = None  # we issue BEGIN ourselves (see _sqlite_begin)
+    cursor = dbapi_connection.cursor()
+    cursor.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+    with contextlib.suppress(sqlite3.OperationalError):  # a read-only file keeps its mode
+        cursor.execute("PRAGMA journal_mode = WAL")
+    cursor.execute("PRAGMA synchronous = FULL")
+    cursor.close()
+
+
+def _sqlite_begin(conn: Connection) -> None:
+    write = conn.get_execution_options().get("faultledger_write", False)
+    conn.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
+
+
+_MESSAGES: tuple[tuple[str, type[StoreError], str], ...] = (
+    ("file is not a database", NotADatabaseError, "is not a faultledger database (not SQLite)"),
+    ("readonly database", DatabaseReadOnlyError, "is read-only; nothing was written"),
+    ("read-only", DatabaseReadOnlyError, "is read-only; nothing was written"),
+    ("database is locked", DatabaseLockedError,
+     f"is locked by another process (waited {BUSY_TIMEOUT_MS / 1000:.0f} s)"),
+    ("disk is full", DatabaseFullError, "cannot grow: the disk or database is full"),
+    ("unable to open database", StoreError, "cannot be opened (missing directory or no access)"),
+    ("disk i/o error", StoreError, "hit an I/O error on disk"),
+)
+
+
+def classify(url: str, error: BaseException) -> StoreError:
+    text = str(getattr(error, "orig", None) or error)
+    where = f"database {describe(url)}"
+    for needle, kind, message in _MESSAGES:
+        if needle in text.lower():
+            return kind(f"{where} {message}")
+    return StoreError(f"{where}: {text}")
+
+
+@contextlib.contextmanager
+def translate_errors(url: str) -> Iterator[None]:
+    """Driver exceptions become StoreError subclasses with a message an operator can act on."""
+    try:
+        yield
+    except (exc.DBAPIError, sqlite3.Error) as error:
+        raise classify(url, error) from None

@@ -1,0 +1,19 @@
+"""The few statements that differ between SQLite and PostgreSQL, kept in one place."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import Table
+from sqlalchemy.dialects import postgresql, sqlite
+
+
+def upsert(table: Table, dialect_name: str) -> Any:
+    """INSERT ... ON CONFLICT (primary key) DO UPDATE SET every other column (executemany)."""
+    module: Any = postgresql if dialect_name == "postgresql" else sqlite
+    statement = module.insert(table)
+    keys = [c.name for c in table.primary_key.columns]
+    return statement.on_conflict_do_update(
+        index_elements=keys,
+        set_={c.name: statement.excluded[c.name] for c in table.columns if c.name not in keys},
+    )

@@ -1,0 +1,174 @@
+"""The append-only event log: append, read in seq order, query, and check the hash chain."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import Connection, Select, func, select
+
+from faultledger.domain.events import LogRecord, PolicyChanged, decode
+from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
+from faultledger.store.schema import events
+
+READ_CHUNK = 5_000
+
+
+def head(conn: Connection) -> tuple[int, str]:
+    """Seq and hash of the newest record, (0, GENESIS_HASH) for an empty log."""
+    row = conn.execute(
+        select(events.c.seq, events.c.hash).order_by(events.c.seq.desc()).limit(1)
+    ).first()
+    return (0, GENESIS_HASH) if row is None else (int(row.seq), str(row.hash))
+
+
+def existing_event_ids(conn: Connection, event_ids: Sequence[str]) -> set[str]:
+    if not event_ids:
+        return set()
+    found = conn.execute(select(events.c.event_id).where(events.c.event_id.in_(event_ids)))
+    return {str(r[0]) for r in found}
+
+
+def append(conn: Connection, records: Sequence[LogRecord], prev_hash: str) -> str:
+    """Insert records (seq already assigned, gap-free) chaining their hashes; returns the last."""
+    rows: list[dict[str, Any]] = []
+    for record in records:
+        payload_json = canonical_json(record.payload)
+        prev_hash = record_hash(
+            prev_hash, record.seq, record.event_id, record.kind, record.fault_code,
+            record.source_id, payload_json, record.occurred_at_ns, record.recorded_at_ns,
+            record.schema_version,
+        )
+        rows.append({
+            "seq": record.seq,
+            "event_id": record.event_id,
+            "kind": record.kind,
+            "fault_code": record.fault_code,
+            "source_id": record.source_id,
+            "payload": payload_json,
+            "occurred_at_ns": record.occurred_at_ns,
+            "recorded_at_ns": record.recorded_at_ns,
+            "schema_version": record.schema_version,
+            "hash": prev_hash,
+        })
+    if rows:
+        conn.execute(events.insert(), rows)
+    return prev_hash
+
+
+def _to_record(row: Any) -> LogRecord:
+    return LogRecord(
+        seq=row.seq,
+        event_id=row.event_id,
+        event=decode(row.kind, row.schema_version, json.loads(row.payload)),
+        occurred_at_ns=row.occurred_at_ns,
+        recorded_at_ns=row.recorded_at_ns,
+        schema_version=row.schema_version,
+        hash=row.hash,
+    )
+
+
+def _chunks(conn: Connection, query: Select[Any], after: int) -> Iterator[Any]:
+    """Keyset pagination over seq so a long read holds no huge cursor or result in memory."""
+    while True:
+        rows = conn.execute(
+            query.where(events.c.seq > after).order_by(events.c.seq).limit(READ_CHUNK)
+        ).all()
+        yield from rows
+        if len(rows) < READ_CHUNK:
+            return
+        after = rows[-1].seq
+
+
+def read(conn: Connection, after_seq: int = 0, upto_seq: int | None = None) -> Iterator[LogRecord]:
+    query = select(events)
+    if upto_seq is not None:
+        query = query.where(events.c.seq <= upto_seq)
+    for row in _chunks(conn, query, after_seq):
+        yield _to_record(row)
+
+
+@dataclass(frozen=True, slots=True)
+class RecordFilter:
+    fault_code: str | None = None
+    source_id: str | None = None
+    since_ns: int | None = None
+    until_ns: int | None = None
+    kinds: tuple[str, ...] = ()
+    limit: int | None = None
+
+
+def find(conn: Connection, where: RecordFilter) -> list[LogRecord]:
+    """Records matching every given filter; times compare with ``occurred_at`` in [since, until)."""
+    query = select(events).order_by(events.c.seq)
+    if where.fault_code is not None:
+        query = query.where(events.c.fault_code == where.fault_code)
+    if where.source_id is not None:
+        query = query.where(events.c.source_id == where.source_id)
+    if where.since_ns is not None:
+        query = query.where(events.c.occurred_at_ns >= where.since_ns)
+    if where.until_ns is not None:
+        query = query.where(events.c.occurred_at_ns < where.until_ns)
+    if where.kinds:
+        query = query.where(events.c.kind.in_(where.kinds))
+    if where.limit is not None:
+        query = query.limit(where.limit)
+    return [_to_record(row) for row in conn.execute(query)]
+
+
+def last_seq_recorded_by(conn: Connection, recorded_at_ns: int) -> int:
+    """Length of the longest log prefix whose records were all recorded at or before a time."""
+    first_later = conn.execute(
+        select(func.min(events.c.seq)).where(events.c.recorded_at_ns > recorded_at_ns)
+    ).scalar()
+    if first_later is None:
+        return head(conn)[0]
+    return int(first_later) - 1
+
+
+def last_policy(conn: Connection, upto_seq: int) -> PolicyChanged | None:
+    row = conn.execute(
+        select(events)
+        .where(events.c.kind == PolicyChanged.kind, events.c.seq <= upto_seq)
+        .order_by(events.c.seq.desc())
+        .limit(1)
+    ).first()
+    if row is None:
+        return None
+    event = _to_record(row).event
+    assert isinstance(event, PolicyChanged)
+    return event
+
+
+@dataclass(frozen=True, slots=True)
+class ChainCheck:
+    """Result of walking the hash chain: how far it is intact and the first problem found."""
+
+    records: int
+    head_seq: int
+    head_hash: str
+    first_bad_seq: int | None
+    problem: str | None
+
+
+def check_chain(conn: Connection, rows: Iterable[Any] | None = None) -> ChainCheck:
+    """Recompute every hash in seq order: edits, deletions, insertions and reorders show up."""
+    prev_seq, prev_hash, count = 0, GENESIS_HASH, 0
+    for row in rows if rows is not None else _chunks(conn, select(events), 0):
+        count += 1
+        if row.seq != prev_seq + 1:
+            return ChainCheck(count, prev_seq, prev_hash, prev_seq + 1,
+                              f"record {prev_seq + 1} is missing (next stored record is "
+                              f"{row.seq}): records were deleted or renumbered")
+        expected = record_hash(
+            prev_hash, row.seq, row.event_id, row.kind, row.fault_code, row.source_id,
+            row.payload, row.occurred_at_ns, row.recorded_at_ns, row.schema_version,
+        )
+        if expected != row.hash:
+            return ChainCheck(count, prev_seq, prev_hash, row.seq,
+                              f"record {row.seq} does not match its hash: it was edited, "
+                              "inserted or moved")
+        prev_seq, prev_hash = row.seq, row.hash
+    return ChainCheck(count, prev_seq, prev_hash, None, None)

@@ -1,0 +1,134 @@
+"""Persistence of the projections (faults, transitions) and the seq they include."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import Connection, delete, select, update
+
+from faultledger.domain.fault import Fault
+from faultledger.domain.integrity import GENESIS_HASH
+from faultledger.domain.projector import Transition
+from faultledger.domain.types import FaultStatus
+from faultledger.store.dialects import upsert
+from faultledger.store.schema import checkpoints, faults, transitions
+
+CHECKPOINT = "projection"
+
+
+@dataclass(frozen=True, slots=True)
+class Checkpoint:
+    seq: int
+    hash: str
+
+
+def _fault_row(fault: Fault) -> dict[str, Any]:
+    return {
+        "fault_code": fault.fault_code,
+        "severity": fault.severity,
+        "description": fault.description,
+        "first_occurred_ns": fault.first_occurred_ns,
+        "last_occurred_ns": fault.last_occurred_ns,
+        "last_passed_ns": fault.last_passed_ns,
+        "occurrence_count": fault.occurrence_count,
+        "status": fault.status.value,
+        "reporting_sources": json.dumps(list(fault.reporting_sources)),
+        "debounce_counter": fault.debounce_counter,
+        "last_report_failed": fault.last_report_failed,
+    }
+
+
+def _fault(row: Any) -> Fault:
+    return Fault(
+        fault_code=row.fault_code,
+        severity=row.severity,
+        description=row.description,
+        first_occurred_ns=row.first_occurred_ns,
+        last_occurred_ns=row.last_occurred_ns,
+        last_passed_ns=row.last_passed_ns,
+        occurrence_count=row.occurrence_count,
+        status=FaultStatus(row.status),
+        reporting_sources=tuple(json.loads(row.reporting_sources)),
+        debounce_counter=row.debounce_counter,
+        last_report_failed=bool(row.last_report_failed),
+    )
+
+
+def _transition_row(t: Transition) -> dict[str, Any]:
+    return {
+        "seq": t.seq,
+        "fault_code": t.fault_code,
+        "from_status": None if t.from_status is None else t.from_status.value,
+        "to_status": t.to_status.value,
+        "at_ns": t.at_ns,
+        "cause": t.cause,
+        "source_id": t.source_id,
+    }
+
+
+def _transition(row: Any) -> Transition:
+    return Transition(
+        seq=row.seq,
+        fault_code=row.fault_code,
+        from_status=None if row.from_status is None else FaultStatus(row.from_status),
+        to_status=FaultStatus(row.to_status),
+        at_ns=row.at_ns,
+        cause=row.cause,
+        source_id=row.source_id,
+    )
+
+
+def load_checkpoint(conn: Connection) -> Checkpoint:
+    row = conn.execute(
+        select(checkpoints.c.seq, checkpoints.c.hash).where(checkpoints.c.name == CHECKPOINT)
+    ).first()
+    return Checkpoint(0, GENESIS_HASH) if row is None else Checkpoint(int(row.seq), row.hash)
+
+
+def load_faults(conn: Connection) -> dict[str, Fault]:
+    return {row.fault_code: _fault(row) for row in conn.execute(select(faults))}
+
+
+def load_transitions(conn: Connection, fault_code: str | None = None) -> list[Transition]:
+    query = select(transitions).order_by(transitions.c.seq)
+    if fault_code is not None:
+        query = query.where(transitions.c.fault_code == fault_code)
+    return [_transition(row) for row in conn.execute(query)]
+
+
+def save(
+    conn: Connection,
+    changed: Iterable[Fault],
+    new_transitions: Iterable[Transition],
+    checkpoint: Checkpoint,
+) -> None:
+    """Write what a batch changed and move the checkpoint, in the caller's transaction."""
+    rows = [_fault_row(f) for f in changed]
+    if rows:
+        conn.execute(upsert(faults, conn.dialect.name), rows)
+    transition_rows = [_transition_row(t) for t in new_transitions]
+    if transition_rows:
+        conn.execute(transitions.insert(), transition_rows)
+    moved = conn.execute(
+        update(checkpoints)
+        .where(checkpoints.c.name == CHECKPOINT)
+        .values(seq=checkpoint.seq, hash=checkpoint.hash)
+    )
+    if moved.rowcount == 0:
+        conn.execute(checkpoints.insert().values(name=CHECKPOINT, seq=checkpoint.seq,
+                                                 hash=checkpoint.hash))
+
+
+def replace_all(
+    conn: Connection,
+    all_faults: Iterable[Fault],
+    all_transitions: Iterable[Transition],
+    checkpoint: Checkpoint,
+) -> None:
+    """Drop the projections and write a full replay's result (``rebuild``)."""
+    conn.execute(delete(faults))
+    conn.execute(delete(transitions))
+    save(conn, all_faults, all_transitions, checkpoint)
