@@ -194,14 +194,14 @@ def test_event_fault_equals_stored_fault_after_each_step(open_ledger, notificati
         Policy(confirmation_threshold=-2, healing_enabled=True, healing_threshold=1)
     )
     received = notifications(ledger)
-    steps = ["F", "F", "F", "P", "P", "F!", "C", "F!"]
+    steps = ["F", "F", "F", "P", "P", "P", "F!", "C", "F!"]
     for i, step in enumerate(steps):
         already = len(received)
         apply_step(ledger, step, at(i))
         for event in received[already:]:
             assert fields_of(event.fault) == fields_of(ledger.get_fault(CODE)), (i, step)
     assert [n.event_type for n in received] == [
-        CONFIRMED, UPDATED, UPDATED, CLEARED, CONFIRMED, CLEARED, CONFIRMED
+        CONFIRMED, UPDATED, UPDATED, UPDATED, CLEARED, CONFIRMED, CLEARED, CONFIRMED
     ]
 
 

@@ -74,15 +74,16 @@ class FaultLedger:
     # -- lifecycle -------------------------------------------------------------------------------
     @classmethod
     def open(cls, url: str, policy: Policy | None = None, *, max_batch: int = 512,
-             upgrade: bool = True, background: bool | None = None) -> FaultLedger:
+             upgrade: bool = True, create: bool = True, background: bool | None = None
+             ) -> FaultLedger:
         """Open (create, migrate) the database and restore state: projections + log tail.
 
         With a ``policy`` this process is a serving writer: the policy is recorded when it
         differs from the log's, HEALED faults it cannot heal become CLEARED, and a background
         thread runs time-based confirmation. Without one, the log's own policy applies and
-        opening writes nothing.
+        opening writes nothing (unless ``upgrade`` has a migration to run).
         """
-        db = Database(url)
+        db = Database(url, create=create)
         try:
             migrate.ensure_current(db, upgrade=upgrade)
             projector, restored = _restore(db)

@@ -44,12 +44,14 @@ class Database:
     lock upgrade; readers use plain ``BEGIN`` and see a consistent snapshot.
     """
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, create: bool = True) -> None:
         self.url = url
         self.path = _sqlite_file(url)
         if self.path is not None:
             if self.path.is_dir():
                 raise NotADatabaseError(f"{self.path} is a directory, not a database file")
+            if not create and not self.path.exists():
+                raise StoreError(f"database file {self.path} does not exist")
             self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             self.engine: Engine = create_engine(url)

@@ -1,0 +1,1 @@
+"""The `faultledger` command line: translates arguments into FaultLedger calls."""

@@ -1,0 +1,318 @@
+"""`faultledger` commands. Each one parses, calls the FaultLedger API, and renders."""
+
+from __future__ import annotations
+
+import getpass
+import json
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from datetime import datetime
+from pathlib import Path
+from typing import Annotated, NoReturn
+
+import typer
+
+from faultledger.cli import render
+from faultledger.domain.types import FaultStatus, Severity
+from faultledger.errors import FaultLedgerError
+from faultledger.service.config import Settings, load_settings
+from faultledger.service.ledger import FaultLedger
+from faultledger.store import migrate
+from faultledger.store.database import Database, describe
+
+app = typer.Typer(
+    help="Event-sourced fault manager: durable fault log, DEM debounce, audit history.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+db_app = typer.Typer(help="Schema migrations (Alembic).", no_args_is_help=True)
+app.add_typer(db_app, name="db")
+
+DbOption = Annotated[
+    str | None,
+    typer.Option("--db", envvar="FAULTLEDGER_DB", show_envvar=True,
+                 help="Database URL (default: the config's, else sqlite:///var/faultledger.db)."),
+]
+ConfigOption = Annotated[
+    Path | None,
+    typer.Option("--config", envvar="FAULTLEDGER_CONFIG", show_envvar=True,
+                 help="YAML configuration file (see config/faultledger.yaml)."),
+]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
+
+def fail(message: str, code: int = 2) -> NoReturn:
+    render.console(stderr=True).print(f"[bold red]error:[/] {message}", markup=True)
+    raise typer.Exit(code)
+
+
+def settings_for(config: Path | None) -> Settings:
+    return load_settings(config)
+
+
+def url_for(db: str | None, settings: Settings) -> str:
+    return db or settings.database.url
+
+
+@contextmanager
+def opened(db: str | None, config: Path | None, *, writer: bool = False) -> Iterator[FaultLedger]:
+    """A ledger for one command: read commands never create, migrate or record anything."""
+    settings = settings_for(config)
+    policy = settings.policy if writer and config is not None else None
+    ledger = FaultLedger.open(url_for(db, settings), policy=policy, create=writer,
+                              upgrade=writer, max_batch=settings.database.max_batch,
+                              background=False)
+    try:
+        yield ledger
+    finally:
+        ledger.close()
+
+
+def parse_time(text: str | None, name: str) -> datetime | None:
+    """ISO 8601; a time without an offset is local time of this machine."""
+    if text is None:
+        return None
+    try:
+        moment = datetime.fromisoformat(text)
+    except ValueError:
+        fail(f"{name} must be an ISO 8601 date or time (e.g. 2026-11-21T22:00), got {text!r}")
+    return moment if moment.tzinfo is not None else moment.astimezone()
+
+
+def parse_severity(text: str) -> int:
+    upper = text.strip().upper()
+    if upper in Severity.__members__:
+        return int(Severity[upper])
+    try:
+        return int(text)
+    except ValueError:
+        fail(f"severity must be 0-3 or INFO/WARN/ERROR/CRITICAL, got {text!r}")
+
+
+@app.command()
+def report(
+    fault_code: Annotated[str, typer.Argument(help="Fault code, e.g. MOTOR_OVERHEAT.")],
+    event_type: Annotated[str, typer.Argument(help="FAILED or PASSED (or 0/1).")],
+    severity: Annotated[str, typer.Option("--severity", "-s",
+                                          help="0-3 or INFO/WARN/ERROR/CRITICAL.")] = "ERROR",
+    description: Annotated[str, typer.Option("--description", "-d")] = "",
+    source: Annotated[str, typer.Option("--source", help="Reporting source id.")] = "/cli",
+    at: Annotated[str | None, typer.Option("--at", help="When it happened (ISO 8601).")] = None,
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """Record one FAILED or PASSED report."""
+    with opened(db, config, writer=True) as ledger:
+        result = ledger.report(fault_code, event_type, parse_severity(severity), description,
+                               source, parse_time(at, "--at"))
+        if not result.accepted:
+            fail(f"report rejected: {result.message}", 1)
+        fault = ledger.get_fault(fault_code)
+    status = fault.status.value if fault else "(no fault)"
+    typer.echo(f"accepted: {result.message}; {fault_code} is {status}")
+
+
+@app.command("list")
+def list_faults(
+    status: Annotated[list[str] | None, typer.Option(
+        "--status", help="Status to include (repeatable). Default: CONFIRMED.")] = None,
+    all_statuses: Annotated[bool, typer.Option("--all", help="Every status.")] = False,
+    severity: Annotated[str | None, typer.Option("--severity", "-s")] = None,
+    at: Annotated[str | None, typer.Option(
+        "--at", help="Show the table as it was at this time (ISO 8601) or seq number.")] = None,
+    as_json: JsonOption = False,
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """List faults (CONFIRMED by default, like the ROS list_faults service)."""
+    with opened(db, config) as ledger:
+        if at is not None:
+            faults = ledger.state_at(int(at) if at.isdigit() else parse_time(at, "--at") or 0)
+            title = f"faults at {at}"
+        else:
+            statuses = [s.value for s in FaultStatus] if all_statuses else status or []
+            wanted_severity = None if severity is None else parse_severity(severity)
+            faults = ledger.list_faults(statuses, wanted_severity)
+            title = f"faults in {describe(ledger.url)}"
+    if as_json:
+        typer.echo(json.dumps([render.fault_dict(f) for f in faults], indent=2))
+    else:
+        render.console().print(render.faults_table(faults, title))
+
+
+@app.command()
+def show(
+    fault_code: str,
+    as_json: JsonOption = False,
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """Show one fault (any status) with its status transitions."""
+    with opened(db, config) as ledger:
+        lookup = ledger.lookup_fault(fault_code)
+        if lookup.fault is None:
+            fail(lookup.message, 1)
+        moves = ledger.transitions(fault_code)
+    if as_json:
+        data = render.fault_dict(lookup.fault)
+        data["transitions"] = [
+            {"seq": t.seq, "at": render.when(render.from_ns(t.at_ns)),
+             "from": t.from_status.value if t.from_status else None,
+             "to": t.to_status.value, "cause": t.cause, "by": t.source_id}
+            for t in moves
+        ]
+        typer.echo(json.dumps(data, indent=2))
+        return
+    out = render.console()
+    out.print(render.faults_table([lookup.fault], f"fault {fault_code}"))
+    out.print(render.transitions_table(moves))
+
+
+@app.command()
+def clear(
+    fault_code: str,
+    actor: Annotated[str | None, typer.Option(help="Who clears (default cli:$USER).")] = None,
+    reason: Annotated[str, typer.Option(help="Why, for the audit trail.")] = "",
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """Clear a fault (recorded with who and why)."""
+    who = actor or f"cli:{_user()}"
+    with opened(db, config, writer=True) as ledger:
+        result = ledger.clear(fault_code, actor=who, reason=reason)
+    if not result.success:
+        fail(result.message, 1)
+    typer.echo(result.message)
+
+
+@app.command()
+def history(
+    code: Annotated[str | None, typer.Option("--code", help="Only this fault code.")] = None,
+    source: Annotated[str | None, typer.Option("--source")] = None,
+    since: Annotated[str | None, typer.Option("--since", help="ISO 8601, inclusive.")] = None,
+    until: Annotated[str | None, typer.Option("--until", help="ISO 8601, exclusive.")] = None,
+    kind: Annotated[list[str] | None, typer.Option("--kind", help="Record kind (repeatable).")
+                    ] = None,
+    limit: Annotated[int | None, typer.Option("--limit", min=1)] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="JSON Lines, one record a line.")
+                       ] = False,
+    as_csv: Annotated[bool, typer.Option("--csv", help="CSV with a header row.")] = False,
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """The audit history: log records in seq order, with their hashes in JSON/CSV."""
+    with opened(db, config) as ledger:
+        records = ledger.history(code=code, since=parse_time(since, "--since"),
+                                 until=parse_time(until, "--until"), source=source,
+                                 kinds=kind or (), limit=limit)
+    if as_json:
+        sys.stdout.write(render.to_json_lines(render.record_dict(r) for r in records))
+    elif as_csv:
+        sys.stdout.write(render.records_csv(records))
+    else:
+        render.console().print(render.history_table(records))
+
+
+@app.command()
+def rebuild(db: DbOption = None, config: ConfigOption = None) -> None:
+    """Drop the projections and replay the whole log."""
+    with opened(db, config, writer=True) as ledger:
+        count = ledger.rebuild()
+        faults = len(ledger.all_faults())
+    typer.echo(f"rebuilt projections from {count} records: {faults} faults")
+
+
+@app.command()
+def verify(as_json: JsonOption = False, db: DbOption = None, config: ConfigOption = None
+           ) -> None:
+    """Check the hash chain and that the projections equal a full replay."""
+    with opened(db, config) as ledger:
+        report_ = ledger.verify()
+    if as_json:
+        typer.echo(json.dumps({
+            "ok": report_.ok, "records": report_.records, "head_seq": report_.head_seq,
+            "head_hash": report_.head_hash, "first_bad_seq": report_.first_bad_seq,
+            "problems": report_.problems}, indent=2))
+    elif report_.ok:
+        typer.echo(f"OK: {report_.records} records, chain intact, projections equal a full "
+                   f"replay; head seq {report_.head_seq} hash {report_.head_hash}")
+    else:
+        for problem in report_.problems:
+            render.console(stderr=True).print(f"[bold red]FAILED:[/] {problem}")
+        if report_.first_bad_seq is not None:
+            typer.echo(f"first bad seq: {report_.first_bad_seq}")
+    if not report_.ok:
+        raise typer.Exit(1)
+
+
+@db_app.command("upgrade")
+def db_upgrade(db: DbOption = None, config: ConfigOption = None) -> None:
+    """Create the database or migrate it to the newest schema revision."""
+    database = Database(url_for(db, settings_for(config)))
+    try:
+        before = migrate.current_revision(database)
+        head = migrate.ensure_current(database, upgrade=True)
+    finally:
+        database.dispose()
+    typer.echo(f"{describe(database.url)}: {before or '(empty)'} -> {head}")
+
+
+@db_app.command("current")
+def db_current(db: DbOption = None, config: ConfigOption = None) -> None:
+    """Print the database's schema revision and the newest one this version knows."""
+    database = Database(url_for(db, settings_for(config)), create=False)
+    try:
+        current = migrate.checked_revision(database)
+    finally:
+        database.dispose()
+    head = migrate.head_revision()
+    state = "up to date" if current == head else "needs `faultledger db upgrade`"
+    typer.echo(f"{describe(database.url)}: {current or '(empty)'} (head {head}, {state})")
+
+
+@app.command()
+def demo(db: DbOption = None, config: ConfigOption = None) -> None:
+    """A short scripted scenario: PREFAILED -> CONFIRMED -> HEALED -> CLEARED, with history."""
+    from faultledger.cli.demo import run_demo
+
+    run_demo(url_for(db, settings_for(config)), render.console())
+
+
+def _user() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        return str(os.getuid())
+
+
+def main() -> None:
+    """Console entry point: operator errors print one line and exit 2, never a traceback."""
+    try:
+        app(standalone_mode=False)
+    except typer.Exit as done:
+        sys.exit(done.exit_code)
+    except FaultLedgerError as error:
+        render.console(stderr=True).print(f"[bold red]error:[/] {error}")
+        sys.exit(2)
+    except KeyboardInterrupt:
+        sys.exit(130)
+    except Exception as error:  # click usage errors and anything unforeseen
+        import click
+
+        if isinstance(error, click.ClickException):
+            error.show()
+            sys.exit(error.exit_code)
+        if isinstance(error, click.exceptions.Abort):
+            sys.exit(1)
+        if os.environ.get("FAULTLEDGER_DEBUG"):
+            raise
+        render.console(stderr=True).print(
+            f"[bold red]internal error:[/] {type(error).__name__}: {error} "
+            "(set FAULTLEDGER_DEBUG=1 for a traceback)")
+        sys.exit(70)
+
+
+if __name__ == "__main__":
+    main()

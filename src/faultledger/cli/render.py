@@ -1,0 +1,153 @@
+"""Turning faults and log records into terminal tables, JSON and CSV."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Iterable
+from datetime import UTC, datetime
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+from faultledger.domain.clock import from_ns
+from faultledger.domain.events import LogRecord
+from faultledger.domain.fault import Fault
+from faultledger.domain.integrity import canonical_json
+from faultledger.domain.projector import Transition
+from faultledger.domain.types import FaultStatus, Severity
+from faultledger.store.database import describe
+
+_STATUS_STYLE = {
+    FaultStatus.CONFIRMED: "bold red",
+    FaultStatus.PREFAILED: "yellow",
+    FaultStatus.PREPASSED: "cyan",
+    FaultStatus.HEALED: "green",
+    FaultStatus.CLEARED: "dim",
+}
+
+
+def when(moment: datetime | None) -> str:
+    return "-" if moment is None else moment.isoformat(timespec="milliseconds")
+
+
+def short(moment: datetime | None) -> str:
+    """Compact UTC time for table cells (the column header says UTC)."""
+    if moment is None:
+        return "-"
+    return moment.astimezone(UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
+
+
+def severity_name(value: int) -> str:
+    return Severity(value).name if value in Severity._value2member_map_ else str(value)
+
+
+def fault_dict(fault: Fault) -> dict[str, Any]:
+    return {
+        "fault_code": fault.fault_code,
+        "status": fault.status.value,
+        "severity": fault.severity,
+        "description": fault.description,
+        "first_occurred": when(fault.first_occurred),
+        "last_occurred": when(fault.last_occurred),
+        "last_passed": None if fault.last_passed is None else when(fault.last_passed),
+        "occurrence_count": fault.occurrence_count,
+        "reporting_sources": list(fault.reporting_sources),
+        "debounce_counter": fault.debounce_counter,
+    }
+
+
+def record_dict(record: LogRecord) -> dict[str, Any]:
+    return {
+        "seq": record.seq,
+        "event_id": record.event_id,
+        "kind": record.kind,
+        "fault_code": record.fault_code,
+        "source_id": record.source_id,
+        "occurred_at": when(record.occurred_at),
+        "recorded_at": when(record.recorded_at),
+        "schema_version": record.schema_version,
+        "payload": record.payload,
+        "hash": record.hash,
+    }
+
+
+def faults_table(faults: Iterable[Fault], title: str) -> Table:
+    table = Table(title=title, title_justify="left")
+    for column in ("code", "status", "severity", "count", "counter", "last occurred (UTC)",
+                   "sources", "description"):
+        table.add_column(column, overflow="fold")
+    for f in faults:
+        table.add_row(
+            f.fault_code, f"[{_STATUS_STYLE[f.status]}]{f.status.value}[/]",
+            severity_name(f.severity), str(f.occurrence_count), str(f.debounce_counter),
+            short(f.last_occurred), ", ".join(f.reporting_sources), f.description,
+        )
+    return table
+
+
+def summary(record: LogRecord) -> str:
+    p = record.payload
+    if record.kind == "fault_reported":
+        if p["event_type"] == "PASSED":
+            return "PASSED"
+        text = f"FAILED {severity_name(p['severity'])}"
+        return text + (f" {p['description']!r}" if p["description"] else "")
+    if record.kind == "fault_cleared":
+        return f"cleared by {p['actor']}" + (f": {p['reason']}" if p["reason"] else "")
+    if record.kind == "policy_changed":
+        return canonical_json(p["policy"])
+    if record.kind == "fault_confirmed_by_timer":
+        return f"PREFAILED for {p['after_sec']} s"
+    return str(p.get("reason", ""))
+
+
+def history_table(records: Iterable[LogRecord]) -> Table:
+    table = Table(title="fault log", title_justify="left")
+    for column in ("seq", "occurred (UTC)", "kind", "code", "source", "details"):
+        table.add_column(column, overflow="fold")
+    for r in records:
+        table.add_row(str(r.seq), short(r.occurred_at), r.kind, r.fault_code or "",
+                      r.source_id or "", summary(r))
+    return table
+
+
+def transitions_table(items: Iterable[Transition]) -> Table:
+    table = Table(title="status transitions", title_justify="left")
+    for column in ("seq", "at (UTC)", "from", "to", "cause", "by"):
+        table.add_column(column)
+    for t in items:
+        table.add_row(str(t.seq), short(from_ns(t.at_ns)),
+                      t.from_status.value if t.from_status else "(new)", t.to_status.value,
+                      t.cause, t.source_id)
+    return table
+
+
+def to_json_lines(items: Iterable[dict[str, Any]]) -> str:
+    return "".join(json.dumps(item, ensure_ascii=False) + "\n" for item in items)
+
+
+def records_csv(records: Iterable[LogRecord]) -> str:
+    out = io.StringIO()
+    columns = ["seq", "event_id", "kind", "fault_code", "source_id", "occurred_at",
+               "recorded_at", "schema_version", "payload", "hash"]
+    writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    for record in records:
+        row = record_dict(record)
+        row["payload"] = canonical_json(row["payload"])
+        writer.writerow(row)
+    return out.getvalue()
+
+
+def describe_url(url: str) -> str:
+    return describe(url)
+
+
+def console(stderr: bool = False) -> Console:
+    """Rich console; when piped (no terminal) tables get 200 columns instead of wrapping at 80."""
+    probe = Console(stderr=stderr)
+    width = None if probe.is_terminal else 200
+    return Console(stderr=stderr, highlight=False, soft_wrap=False, width=width)

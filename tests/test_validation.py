@@ -1,0 +1,294 @@
+"""SPEC §4.5: rejected input gets a clear message, stores nothing and announces nothing."""
+
+from __future__ import annotations
+
+import re
+from datetime import datetime, timedelta, timezone
+
+import pytest
+
+from faultledger import Fault, FaultStatus, Policy
+
+T0 = datetime(2026, 11, 21, 22, 0, tzinfo=timezone.utc)
+CODE = "MOTOR_OVERHEAT"
+UNKNOWN = "NO_SUCH_FAULT"
+
+FAULT_FIELDS = (
+    "fault_code", "severity", "description", "first_occurred", "last_occurred", "last_passed",
+    "occurrence_count", "status", "reporting_sources", "debounce_counter",
+)
+
+
+def fields_of(f: Fault) -> dict[str, object]:
+    return {name: getattr(f, name) for name in FAULT_FIELDS}
+
+
+def invalid_character(char: str) -> str:
+    return (
+        f"fault_code contains invalid character '{char}'. "
+        "Only alphanumeric, underscore, hyphen, and dot are allowed"
+    )
+
+
+INVALID_CODES = [
+    pytest.param("", "fault_code cannot be empty", id="empty"),
+    pytest.param("A" * 129, "fault_code exceeds maximum length of 128", id="129_chars"),
+    pytest.param("MOTOR OVERHEAT", invalid_character(" "), id="space"),
+    pytest.param("MOTOR/OVERHEAT", invalid_character("/"), id="slash"),
+    pytest.param("MOTOR:OVERHEAT", invalid_character(":"), id="colon"),
+    pytest.param("MOTOR*", invalid_character("*"), id="asterisk"),
+    pytest.param("MOTOR_ÜBERHITZT", invalid_character("Ü"), id="non_ascii_letter"),
+    pytest.param("MOTOR_٣", invalid_character("٣"), id="non_ascii_digit"),
+    pytest.param("MOTOR..OVERHEAT", "fault_code cannot contain '..'", id="double_dot_inside"),
+    pytest.param("..MOTOR", "fault_code cannot contain '..'", id="double_dot_leading"),
+    pytest.param("MOTOR...", "fault_code cannot contain '..'", id="triple_dot"),
+]
+
+# A valid FAILED report on CODE; each invalid case below changes one argument.
+VALID_REPORT = {
+    "fault_code": CODE,
+    "event_type": "FAILED",
+    "severity": 1,
+    "description": "",
+    "source_id": "/motor",
+    "at": T0 + timedelta(seconds=30),
+}
+
+# (changed arguments, a word the clear message must contain, or None to only require a message)
+INVALID_FIELDS = [
+    pytest.param({"event_type": "BROKEN"}, "event_type", id="event_type_unknown_name"),
+    pytest.param({"event_type": 2}, "event_type", id="event_type_2"),
+    pytest.param({"event_type": -1}, "event_type", id="event_type_minus_1"),
+    pytest.param({"severity": 4}, "severity", id="severity_4"),
+    pytest.param({"severity": -1}, "severity", id="severity_minus_1"),
+    pytest.param({"source_id": ""}, "source_id", id="source_id_empty"),
+    pytest.param({"description": "x" * 4097}, "description", id="description_4097_chars"),
+    pytest.param({"description": "bad\udcff"}, "description", id="description_lone_surrogate"),
+    pytest.param({"at": datetime(2026, 11, 21, 22, 0, 30)}, None, id="at_naive_datetime"),
+]
+
+# Every invalid report, as changed arguments.
+INVALID_REPORTS = [
+    *(
+        pytest.param({"fault_code": p.values[0]}, id=f"fault_code_{p.id}")
+        for p in INVALID_CODES
+    ),
+    *(
+        pytest.param({"fault_code": p.values[0], "event_type": "PASSED"},
+                     id=f"passed_fault_code_{p.id}")
+        for p in INVALID_CODES
+    ),
+    *(pytest.param(p.values[0], id=p.id) for p in INVALID_FIELDS),
+]
+
+
+def report(ledger, **changes):
+    arguments = {**VALID_REPORT, **changes}
+    code = arguments.pop("fault_code")
+    event_type = arguments.pop("event_type")
+    return ledger.report(code, event_type, **arguments)
+
+
+@pytest.fixture
+def ledger(open_ledger):
+    """A ledger holding one PREFAILED fault CODE, so an accepted report would change it."""
+    ledger = open_ledger(Policy(confirmation_threshold=-3))
+    first = ledger.report(CODE, "FAILED", severity=1, description="hot", source_id="/motor", at=T0)
+    assert first.accepted, first.message
+    return ledger
+
+
+# --------------------------------------------------------------------------------------------
+# report(): rejections
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("event_type", ["FAILED", "PASSED"])
+@pytest.mark.parametrize(("code", "message"), INVALID_CODES)
+def test_invalid_fault_code_rejected_with_spec_message(ledger, code, message, event_type):
+    result = report(ledger, fault_code=code, event_type=event_type)
+    assert (result.accepted, result.message) == (False, message)
+
+
+@pytest.mark.parametrize(("changes", "word"), INVALID_FIELDS)
+def test_invalid_report_field_rejected_with_clear_message(ledger, changes, word) -> None:
+    result = report(ledger, **changes)
+    assert result.accepted is False
+    assert result.message.strip() != ""
+    if word is not None:
+        assert word in result.message
+
+
+@pytest.mark.parametrize("changes", INVALID_REPORTS)
+def test_rejected_report_stores_nothing(ledger, changes) -> None:
+    log_length = len(ledger.history())
+    before = fields_of(ledger.get_fault(CODE))
+
+    result = report(ledger, **changes)
+
+    assert result.accepted is False
+    assert result.seq is None
+    assert len(ledger.history()) == log_length
+    assert fields_of(ledger.get_fault(CODE)) == before
+
+
+@pytest.mark.parametrize("changes", INVALID_REPORTS)
+def test_rejected_report_creates_no_fault(ledger, changes) -> None:
+    report(ledger, **changes)
+    everything = ledger.list_faults(statuses=[s.value for s in FaultStatus])
+    assert [f.fault_code for f in everything] == [CODE]
+
+
+@pytest.mark.parametrize("changes", INVALID_REPORTS)
+def test_rejected_report_emits_no_notification(ledger, notifications, changes) -> None:
+    received = notifications(ledger)
+    # made CONFIRMED first, so an accepted FAILED or PASSED would announce fault_updated
+    report(ledger, severity=3)
+    received.clear()
+
+    report(ledger, **changes)
+
+    assert received == []
+
+
+# --------------------------------------------------------------------------------------------
+# report(): what is accepted
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        pytest.param({"fault_code": "A" * 128}, id="code_128_chars"),
+        pytest.param({"fault_code": "x"}, id="code_1_char"),
+        pytest.param({"fault_code": "Motor-1_overheat.v2"}, id="code_all_allowed_kinds"),
+        pytest.param({"fault_code": "0123456789"}, id="code_digits"),
+        pytest.param({"severity": 0}, id="severity_0"),
+        pytest.param({"severity": 3}, id="severity_3"),
+        pytest.param({"event_type": 0}, id="event_type_0"),
+        pytest.param({"event_type": 1}, id="event_type_1"),
+        pytest.param({"description": "x" * 4096}, id="description_4096_chars"),
+        pytest.param({"description": "Überhitzung ✓ 過熱"}, id="description_unicode"),
+        pytest.param({"source_id": "lidar"}, id="source_without_slash"),
+        pytest.param({"at": None}, id="at_none_means_now"),
+        pytest.param(
+            {"at": datetime(2026, 11, 22, 0, 0, tzinfo=timezone(timedelta(hours=2)))},
+            id="at_non_utc_aware",
+        ),
+    ],
+)
+def test_valid_report_accepted(ledger, changes) -> None:
+    result = report(ledger, **changes)
+    assert result.accepted is True, result.message
+
+
+def test_accepted_report_is_stored_under_its_seq(ledger) -> None:
+    log_length = len(ledger.history())
+
+    result = report(ledger)
+
+    records = ledger.history()
+    assert len(records) == log_length + 1
+    [stored] = [r for r in records if r.seq == result.seq]
+    assert (stored.kind, stored.fault_code) == ("fault_reported", CODE)
+
+
+@pytest.mark.parametrize("severity", [4, -1, 99])
+def test_severity_not_checked_on_passed(ledger, severity) -> None:
+    result = report(ledger, event_type="PASSED", severity=severity)
+    assert result.accepted is True, result.message
+
+
+# --------------------------------------------------------------------------------------------
+# get and lookup
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("code", "message"), INVALID_CODES)
+def test_get_fault_rejects_invalid_code_with_spec_message(ledger, code, message) -> None:
+    with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
+        ledger.get_fault(code)
+
+
+@pytest.mark.parametrize(("code", "message"), INVALID_CODES)
+def test_lookup_fault_rejects_invalid_code_with_spec_message(ledger, code, message) -> None:
+    result = ledger.lookup_fault(code)
+    assert (result.success, result.message, result.fault) == (False, message, None)
+
+
+def test_get_fault_unknown_returns_none(ledger) -> None:
+    assert ledger.get_fault(UNKNOWN) is None
+
+
+def test_lookup_fault_unknown_says_not_found(ledger) -> None:
+    result = ledger.lookup_fault(UNKNOWN)
+    assert (result.success, result.message, result.fault) == (
+        False, f"Fault not found: {UNKNOWN}", None
+    )
+
+
+def test_lookup_fault_known_succeeds_with_empty_message(ledger) -> None:
+    result = ledger.lookup_fault(CODE)
+    assert (result.success, result.message, result.fault.fault_code) == (True, "", CODE)
+
+
+# --------------------------------------------------------------------------------------------
+# clear
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("code", "message"), INVALID_CODES)
+def test_clear_rejects_invalid_code_with_spec_message(ledger, code, message) -> None:
+    result = ledger.clear(code, actor="cli:alice", reason="")
+    assert (result.success, result.message) == (False, message)
+
+
+@pytest.mark.parametrize(
+    "code", [*(p.values[0] for p in INVALID_CODES), UNKNOWN], ids=[
+        *(p.id for p in INVALID_CODES), "unknown_code"
+    ]
+)
+def test_failed_clear_stores_nothing(ledger, code) -> None:
+    log_length = len(ledger.history())
+    before = fields_of(ledger.get_fault(CODE))
+
+    ledger.clear(code, actor="cli:alice", reason="")
+
+    assert len(ledger.history()) == log_length
+    assert fields_of(ledger.get_fault(CODE)) == before
+
+
+@pytest.mark.parametrize(
+    "code", [*(p.values[0] for p in INVALID_CODES), UNKNOWN], ids=[
+        *(p.id for p in INVALID_CODES), "unknown_code"
+    ]
+)
+def test_failed_clear_emits_no_notification(ledger, notifications, code) -> None:
+    received = notifications(ledger)
+    ledger.clear(code, actor="cli:alice", reason="")
+    assert received == []
+
+
+def test_clear_unknown_fault_says_not_found(ledger) -> None:
+    result = ledger.clear(UNKNOWN, actor="cli:alice", reason="")
+    assert (result.success, result.message) == (False, f"Fault not found: {UNKNOWN}")
+
+
+def test_clear_known_fault_says_cleared(ledger) -> None:
+    result = ledger.clear(CODE, actor="cli:alice", reason="")
+    assert (result.success, result.message) == (True, f"Fault cleared: {CODE}")
+    assert ledger.get_fault(CODE).status == FaultStatus.CLEARED
+
+
+def test_clear_of_already_cleared_fault_succeeds(ledger) -> None:
+    ledger.clear(CODE, actor="cli:alice", reason="")
+    result = ledger.clear(CODE, actor="cli:bob", reason="again")
+    assert (result.success, result.message) == (True, f"Fault cleared: {CODE}")
+
+
+def test_clear_is_logged_with_actor_and_reason(ledger) -> None:
+    ledger.clear(CODE, actor="cli:alice", reason="replaced the fan")
+
+    [record] = [r for r in ledger.history() if r.kind == "fault_cleared"]
+    assert record.fault_code == CODE
+    assert {"cli:alice", "replaced the fan"} <= set(record.payload.values())
