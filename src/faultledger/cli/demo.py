@@ -53,5 +53,6 @@ def run_demo(url: str, out: Console) -> None:
 
 def _announce(out: Console, announced: list[Notification]) -> None:
     for n in announced:
-        out.print(f"      [magenta]~/events: {n.event_type.value}[/] (status {n.fault.status.value})")
+        out.print(f"      [magenta]~/events: {n.event_type.value}[/] "
+                  f"(status {n.fault.status.value})")
     announced.clear()

@@ -15,6 +15,7 @@ from typing import Annotated, NoReturn
 import typer
 
 from faultledger.cli import render
+from faultledger.domain.clock import from_ns
 from faultledger.domain.types import FaultStatus, Severity
 from faultledger.errors import FaultLedgerError
 from faultledger.service.config import Settings, load_settings
@@ -158,7 +159,7 @@ def show(
     if as_json:
         data = render.fault_dict(lookup.fault)
         data["transitions"] = [
-            {"seq": t.seq, "at": render.when(render.from_ns(t.at_ns)),
+            {"seq": t.seq, "at": render.when(from_ns(t.at_ns)),
              "from": t.from_status.value if t.from_status else None,
              "to": t.to_status.value, "cause": t.cause, "by": t.source_id}
             for t in moves
@@ -290,22 +291,11 @@ def _user() -> str:
 def main() -> None:
     """Console entry point: operator errors print one line and exit 2, never a traceback."""
     try:
-        app(standalone_mode=False)
-    except typer.Exit as done:
-        sys.exit(done.exit_code)
+        app()  # standalone: usage errors print help and exit 2 by themselves
     except FaultLedgerError as error:
         render.console(stderr=True).print(f"[bold red]error:[/] {error}")
         sys.exit(2)
-    except KeyboardInterrupt:
-        sys.exit(130)
-    except Exception as error:  # click usage errors and anything unforeseen
-        import click
-
-        if isinstance(error, click.ClickException):
-            error.show()
-            sys.exit(error.exit_code)
-        if isinstance(error, click.exceptions.Abort):
-            sys.exit(1)
+    except Exception as error:
         if os.environ.get("FAULTLEDGER_DEBUG"):
             raise
         render.console(stderr=True).print(
