@@ -129,12 +129,14 @@ class Projector:
             self._faults[fault.fault_code] = fault
 
     # -- applying ----------------------------------------------------------------------------
-    def apply_all(self, records: Iterable[LogRecord]) -> int:
-        count = 0
+    def apply_all(self, records: Iterable[LogRecord]) -> list[Transition]:
+        """Apply records in order (replay); returns the transitions they caused."""
+        found: list[Transition] = []
         for record in records:
-            self.apply(record)
-            count += 1
-        return count
+            transition = self.apply(record).transition
+            if transition is not None:
+                found.append(transition)
+        return found
 
     def apply(self, record: LogRecord) -> Effect:
         if record.seq != self.seq + 1:

@@ -326,12 +326,7 @@ def _event_id_error(event_id: str) -> str | None:
 
 def _replay(conn: Connection, upto: int | None = None) -> tuple[Projector, list[Transition]]:
     projector = Projector()
-    found: list[Transition] = []
-    for record in event_log.read(conn, upto_seq=upto):
-        effect = projector.apply(record)
-        if effect.transition is not None:
-            found.append(effect.transition)
-    return projector, found
+    return projector, projector.apply_all(event_log.read(conn, upto_seq=upto))
 
 
 def _restore(db: Database) -> tuple[Projector, Restored]:
@@ -362,11 +357,7 @@ def _persist_tail(db: Database, projector: Projector) -> Projector:
     try:
         with db.writing() as conn:
             projector.stage()
-            found: list[Transition] = []
-            for record in event_log.read(conn, after_seq=projector.seq):
-                effect = projector.apply(record)
-                if effect.transition is not None:
-                    found.append(effect.transition)
+            found = projector.apply_all(event_log.read(conn, after_seq=projector.seq))
             projections.save(conn, projector.staged_faults(), found,
                              projections.Checkpoint(*event_log.head(conn)))
         projector.commit()

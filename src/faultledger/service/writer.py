@@ -240,12 +240,7 @@ class Writer:
                 f"the log ends at seq {stored_seq} but this process has applied {projector.seq}: "
                 "the database was replaced or truncated underneath; restart faultledger"
             )
-        found: list[Transition] = []
-        for record in event_log.read(conn, after_seq=projector.seq):
-            effect = projector.apply(record)
-            if effect.transition is not None:
-                found.append(effect.transition)
-        return found
+        return projector.apply_all(event_log.read(conn, after_seq=projector.seq))
 
     def _ensure_policy(self, batch: _Batch) -> None:
         """Record the effective policy before the first record that depends on it."""
