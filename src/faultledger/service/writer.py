@@ -10,12 +10,12 @@ and nothing is acknowledged before it is durable.
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 import uuid
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import Connection
@@ -36,9 +36,11 @@ from faultledger.domain.projector import Effect, Projector, Transition
 from faultledger.errors import FaultLedgerError, LedgerClosedError, StoreError
 from faultledger.service.results import ClearResult, ReportResult
 from faultledger.store import event_log, projections
-from faultledger.store.database import Database
+from faultledger.store.database import Database, WriteConnection
 
 log = logging.getLogger(__name__)
+
+GATHER_WAIT_S = 0.0003
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,12 +90,9 @@ Command = Report | Clear | ConfirmOverdue | ReclassifyHealed | RecordPolicy | Ca
 @dataclass(slots=True)
 class _Pending:
     command: Command
-    done: threading.Event = field(default_factory=threading.Event)
+    done: bool = False
     result: Any = None
     error: BaseException | None = None
-
-
-_STOP = object()
 
 
 class _Batch:
@@ -126,7 +125,14 @@ class _Batch:
 
 
 class Writer:
-    """Owns the projector and the only write path to the log of this process."""
+    """Owns the projector and the only write path to the log of this process.
+
+    Group commit without a writer thread (leader/follower): a caller queues its command;
+    if no commit is running it becomes the leader and commits everything queued, on its own
+    thread, until its own command is done; callers arriving meanwhile queue up and are
+    committed together by the next leader. A lone reporter pays no thread hand-off; many
+    reporters share each fsync.
+    """
 
     def __init__(
         self,
@@ -141,60 +147,105 @@ class Writer:
         self.desired_policy = desired_policy
         self.max_batch = max_batch
         self._announce = announce
-        self._queue: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._connection = WriteConnection(db)
+        self._queue: deque[_Pending] = deque()
+        self._turn = threading.Condition()
+        self._arrived = threading.Condition(self._turn._lock)  # type: ignore[attr-defined]
+        self._leading = False
+        self._gathering = False
+        self._last_batch = 1
         self._closed = False
-        self._close_lock = threading.Lock()
-        self._thread = threading.Thread(target=self._run, name="faultledger-writer", daemon=True)
-        self._thread.start()
+        self._policy_checked: Policy | None = None
         self.commits = 0
 
-    # -- callers' side -------------------------------------------------------------------------
     def submit(self, command: Command) -> Any:
-        """Queue a command and wait until it is durable (or failed); returns its result."""
+        """Queue a command and return its result once it is durable (or failed)."""
         pending = _Pending(command)
-        with self._close_lock:
+        with self._turn:
             if self._closed:
                 raise LedgerClosedError("the ledger is closed")
-            self._queue.put(pending)
-        pending.done.wait()
+            self._queue.append(pending)
+            if self._gathering:
+                self._arrived.notify()
+            while self._leading and not pending.done:
+                self._turn.wait()
+            if not pending.done:
+                self._leading = True
+        if not pending.done:
+            try:
+                self._lead(pending)
+            finally:
+                with self._turn:
+                    self._leading = False
+                    self._turn.notify_all()
         if pending.error is not None:
             raise pending.error
         return pending.result
 
-    def close(self) -> None:
-        with self._close_lock:
-            if self._closed:
-                return
-            self._closed = True
-            self._queue.put(_STOP)
-        self._thread.join()
-
-    # -- writer thread -------------------------------------------------------------------------
-    def _run(self) -> None:
-        stop = False
-        while not stop:
-            item = self._queue.get()
-            if item is _STOP:
-                return
-            batch: list[_Pending] = [item]
-            while len(batch) < self.max_batch:
-                try:
-                    item = self._queue.get_nowait()
-                except queue.Empty:
-                    break
-                if item is _STOP:
-                    stop = True
-                    break
-                batch.append(item)
+    def _lead(self, own: _Pending) -> None:
+        while not own.done:
+            with self._turn:
+                self._gather()
+                count = min(len(self._queue), self.max_batch)
+                batch = [self._queue.popleft() for _ in range(count)]
+                self._last_batch = count
             for group in _split_exclusive(batch):
                 self._commit(group)
+            with self._turn:
+                self._turn.notify_all()  # wake the callers this commit answered
+
+    def _gather(self) -> None:
+        """Wait up to GATHER_WAIT_S for as many commands as the last commit carried.
+
+        The callers answered by the previous commit usually come straight back with their
+        next report; waiting a fraction of an fsync for them lets them share the next one.
+        A lone reporter (last batch of one) never waits. Called with ``_turn`` held.
+        """
+        target = min(self._last_batch, self.max_batch)
+        if len(self._queue) >= target:
+            return
+        deadline = time.monotonic() + GATHER_WAIT_S
+        self._gathering = True
+        try:
+            while len(self._queue) < target:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return
+                self._arrived.wait(remaining)
+        finally:
+            self._gathering = False
+
+    def close(self) -> None:
+        """Refuse new commands, let queued ones finish, release the connection."""
+        with self._turn:
+            self._closed = True
+            while self._leading or self._queue:
+                if not self._leading:
+                    self._leading = True
+                    break
+                self._turn.wait()
+            else:
+                self._connection.close()
+                return
+        try:
+            while self._queue:
+                with self._turn:
+                    batch = list(self._queue)
+                    self._queue.clear()
+                for group in _split_exclusive(batch):
+                    self._commit(group)
+        finally:
+            with self._turn:
+                self._leading = False
+                self._turn.notify_all()
+            self._connection.close()
 
     def _commit(self, group: list[_Pending]) -> None:
         projector = self.projector
         projector.stage()
         batch = _Batch(projector, time.time_ns())
         try:
-            with self.db.writing() as conn:
+            with self._connection.transaction() as conn:
                 stored_seq, head_hash = event_log.head(conn)
                 batch.transitions.extend(self._catch_up(conn, stored_seq))
                 ids = [p.command.event_id for p in group
@@ -220,7 +271,7 @@ class Writer:
         if batch.notifications:
             self._announce(batch.notifications)
         for pending in group:
-            pending.done.set()
+            pending.done = True
 
     @staticmethod
     def _fail(group: list[_Pending], error: FaultLedgerError) -> None:
@@ -231,10 +282,12 @@ class Writer:
                 pending.result = ClearResult(False, str(error))
             else:
                 pending.error = error
-            pending.done.set()
+            pending.done = True
 
     def _catch_up(self, conn: Connection, stored_seq: int) -> list[Transition]:
         projector = self.projector
+        if stored_seq == projector.seq:
+            return []
         if stored_seq < projector.seq:
             raise StoreError(
                 f"the log ends at seq {stored_seq} but this process has applied {projector.seq}: "
@@ -245,9 +298,12 @@ class Writer:
     def _ensure_policy(self, batch: _Batch) -> None:
         """Record the effective policy before the first record that depends on it."""
         projector = self.projector
+        if projector.policy_recorded and projector.policy is self._policy_checked:
+            return
         wanted = self.desired_policy or projector.policy
         if not projector.policy_recorded or projector.policy != wanted:
             batch.add(PolicyChanged(wanted.to_record()), batch.recorded_ns)
+        self._policy_checked = projector.policy
 
     def _build(self, command: Command, batch: _Batch, known: set[str], conn: Connection) -> Any:
         projector = self.projector

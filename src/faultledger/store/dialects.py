@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 from sqlalchemy import Table
 from sqlalchemy.dialects import postgresql, sqlite
 
 
+@lru_cache(maxsize=16)
 def upsert(table: Table, dialect_name: str) -> Any:
-    """INSERT ... ON CONFLICT (primary key) DO UPDATE SET every other column (executemany)."""
+    """INSERT ... ON CONFLICT (primary key) DO UPDATE SET every other column (executemany).
+
+    Built once per table and dialect: constructing SQLAlchemy statements costs more than
+    executing them on the ingest path.
+    """
     module: Any = postgresql if dialect_name == "postgresql" else sqlite
     statement = module.insert(table)
     keys = [c.name for c in table.primary_key.columns]

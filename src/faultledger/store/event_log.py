@@ -11,17 +11,20 @@ from sqlalchemy import Connection, Select, func, select
 
 from faultledger.domain.events import LogRecord, PolicyChanged, decode
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
+from faultledger.store import fastpath
 from faultledger.store.schema import events
 
 READ_CHUNK = 5_000
 
 
+_HEAD = select(events.c.seq, events.c.hash).order_by(events.c.seq.desc()).limit(1)
+_INSERT = events.insert()
+
+
 def head(conn: Connection) -> tuple[int, str]:
     """Seq and hash of the newest record, (0, GENESIS_HASH) for an empty log."""
-    row = conn.execute(
-        select(events.c.seq, events.c.hash).order_by(events.c.seq.desc()).limit(1)
-    ).first()
-    return (0, GENESIS_HASH) if row is None else (int(row.seq), str(row.hash))
+    row = fastpath.fetch_one(conn, _HEAD)
+    return (0, GENESIS_HASH) if row is None else (int(row[0]), str(row[1]))
 
 
 def existing_event_ids(conn: Connection, event_ids: Sequence[str]) -> set[str]:
@@ -53,8 +56,7 @@ def append(conn: Connection, records: Sequence[LogRecord], prev_hash: str) -> st
             "schema_version": record.schema_version,
             "hash": prev_hash,
         })
-    if rows:
-        conn.execute(events.insert(), rows)
+    fastpath.execute_many(conn, _INSERT, rows)
     return prev_hash
 
 

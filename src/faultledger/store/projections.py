@@ -7,16 +7,18 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import Connection, delete, select, update
+from sqlalchemy import Connection, delete, select
 
 from faultledger.domain.fault import Fault
-from faultledger.domain.integrity import GENESIS_HASH
+from faultledger.domain.integrity import GENESIS_HASH, canonical_json
 from faultledger.domain.projector import Transition
 from faultledger.domain.types import FaultStatus
+from faultledger.store import fastpath
 from faultledger.store.dialects import upsert
 from faultledger.store.schema import checkpoints, faults, transitions
 
 CHECKPOINT = "projection"
+_INSERT_TRANSITION = transitions.insert()
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,7 +37,7 @@ def _fault_row(fault: Fault) -> dict[str, Any]:
         "last_passed_ns": fault.last_passed_ns,
         "occurrence_count": fault.occurrence_count,
         "status": fault.status.value,
-        "reporting_sources": json.dumps(list(fault.reporting_sources)),
+        "reporting_sources": canonical_json(fault.reporting_sources),
         "debounce_counter": fault.debounce_counter,
         "last_report_failed": fault.last_report_failed,
     }
@@ -106,20 +108,11 @@ def save(
     checkpoint: Checkpoint,
 ) -> None:
     """Write what a batch changed and move the checkpoint, in the caller's transaction."""
-    rows = [_fault_row(f) for f in changed]
-    if rows:
-        conn.execute(upsert(faults, conn.dialect.name), rows)
-    transition_rows = [_transition_row(t) for t in new_transitions]
-    if transition_rows:
-        conn.execute(transitions.insert(), transition_rows)
-    moved = conn.execute(
-        update(checkpoints)
-        .where(checkpoints.c.name == CHECKPOINT)
-        .values(seq=checkpoint.seq, hash=checkpoint.hash)
-    )
-    if moved.rowcount == 0:
-        conn.execute(checkpoints.insert().values(name=CHECKPOINT, seq=checkpoint.seq,
-                                                 hash=checkpoint.hash))
+    dialect = conn.dialect.name
+    fastpath.execute_many(conn, upsert(faults, dialect), [_fault_row(f) for f in changed])
+    fastpath.execute_many(conn, _INSERT_TRANSITION, [_transition_row(t) for t in new_transitions])
+    fastpath.execute_many(conn, upsert(checkpoints, dialect),
+                          [{"name": CHECKPOINT, "seq": checkpoint.seq, "hash": checkpoint.hash}])
 
 
 def replace_all(
