@@ -35,9 +35,7 @@ def upgrade() -> None:
         sa.Column("hash", sa.String(64), nullable=False),
     )
     op.create_index("ix_events_fault_code_seq", "events", ["fault_code", "seq"])
-    op.create_index("ix_events_kind_seq", "events", ["kind", "seq"])
     op.create_index("ix_events_occurred_at", "events", ["occurred_at_ns"])
-    op.create_index("ix_events_recorded_at", "events", ["recorded_at_ns"])
 
     op.create_table(
         "faults",
@@ -72,6 +70,7 @@ def upgrade() -> None:
         sa.Column("name", sa.String(40), primary_key=True),
         sa.Column("seq", sa.BigInteger(), nullable=False),
         sa.Column("hash", sa.String(64), nullable=False),
+        sa.Column("policy_seq", sa.BigInteger(), nullable=False),
     )
 
 

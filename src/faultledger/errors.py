@@ -35,6 +35,10 @@ class DatabaseFullError(StoreError):
     pass
 
 
+class WriteConflictError(StoreError):
+    """Another process appended the same seq first; the batch is retried after catching up."""
+
+
 class SchemaTooNewError(StoreError):
     pass
 

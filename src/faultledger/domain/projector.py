@@ -58,12 +58,14 @@ class Projector:
         policy: Policy | None = None,
         seq: int = 0,
         policy_recorded: bool = False,
+        policy_seq: int = 0,
     ) -> None:
         self._faults: dict[str, Fault] = dict(faults or {})
         self._staged: dict[str, Fault] | None = None
-        self._saved: tuple[Policy, int, bool] | None = None
+        self._saved: tuple[Policy, int, bool, int] | None = None
         self.policy = policy or Policy()
         self.policy_recorded = policy_recorded
+        self.policy_seq = policy_seq
         self.seq = seq
 
     # -- reading -----------------------------------------------------------------------------
@@ -105,7 +107,7 @@ class Projector:
     # -- staging -----------------------------------------------------------------------------
     def stage(self) -> None:
         self._staged = {}
-        self._saved = (self.policy, self.seq, self.policy_recorded)
+        self._saved = (self.policy, self.seq, self.policy_recorded, self.policy_seq)
 
     def staged_faults(self) -> list[Fault]:
         return list((self._staged or {}).values())
@@ -118,7 +120,7 @@ class Projector:
 
     def rollback(self) -> None:
         if self._saved is not None:
-            self.policy, self.seq, self.policy_recorded = self._saved
+            self.policy, self.seq, self.policy_recorded, self.policy_seq = self._saved
         self._staged = None
         self._saved = None
 
@@ -154,6 +156,7 @@ class Projector:
         if isinstance(event, PolicyChanged):
             self.policy = Policy.model_validate(event.policy)
             self.policy_recorded = True
+            self.policy_seq = record.seq
         return _NOTHING
 
     def _reported(self, record: LogRecord, event: FaultReported) -> Effect:

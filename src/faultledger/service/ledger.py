@@ -181,7 +181,8 @@ class FaultLedger:
         def action(conn: Connection, writer: Writer) -> int:
             projector, replayed = _replay(conn)
             projections.replace_all(conn, projector.committed(), replayed,
-                                    projections.Checkpoint(*event_log.head(conn)))
+                                    projections.Checkpoint(*event_log.head(conn),
+                                                           projector.policy_seq))
             writer.projector = projector
             return projector.seq
 
@@ -261,7 +262,7 @@ class FaultLedger:
                     first_bad = chain.head_seq
                     problems.append(f"record {chain.head_seq} differs from the recorded head")
             if not problems:
-                problems.extend(_projection_problems(conn, checkpoint.seq))
+                problems.extend(_projection_problems(conn, checkpoint))
         return VerifyReport(not problems, chain.records, chain.head_seq, chain.head_hash,
                             first_bad, problems)
 
@@ -333,12 +334,13 @@ def _restore(db: Database) -> tuple[Projector, Restored]:
     """Persisted projections plus a replay of the records after their checkpoint."""
     with db.reading() as conn:
         checkpoint = projections.load_checkpoint(conn)
-        policy = event_log.last_policy(conn, checkpoint.seq)
+        policy = event_log.policy_at(conn, checkpoint.policy_seq)
         projector = Projector(
             projections.load_faults(conn),
             Policy.model_validate(policy.policy) if policy else None,
             checkpoint.seq,
             policy_recorded=policy is not None,
+            policy_seq=checkpoint.policy_seq,
         )
         stored_seq = event_log.head(conn)[0]
     if stored_seq < checkpoint.seq:
@@ -359,7 +361,7 @@ def _persist_tail(db: Database, projector: Projector) -> Projector:
             projector.stage()
             found = projector.apply_all(event_log.read(conn, after_seq=projector.seq))
             projections.save(conn, projector.staged_faults(), found,
-                             projections.Checkpoint(*event_log.head(conn)))
+                             projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
         projector.commit()
     except FaultLedgerError as error:
         projector.rollback()
@@ -370,8 +372,8 @@ def _persist_tail(db: Database, projector: Projector) -> Projector:
     return projector
 
 
-def _projection_problems(conn: Connection, upto: int) -> list[str]:
-    expected, expected_transitions = _replay(conn, upto)
+def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -> list[str]:
+    expected, expected_transitions = _replay(conn, checkpoint.seq)
     stored = projections.load_faults(conn)
     problems: list[str] = []
     replayed = {f.fault_code: f for f in expected.committed()}
@@ -380,4 +382,7 @@ def _projection_problems(conn: Connection, upto: int) -> list[str]:
             problems.append(f"projection of fault {code} differs from a full replay of the log")
     if projections.load_transitions(conn) != expected_transitions:
         problems.append("transitions table differs from a full replay of the log")
+    if checkpoint.policy_seq != expected.policy_seq:
+        problems.append(f"checkpoint names record {checkpoint.policy_seq} as the policy in force, "
+                        f"a replay finds {expected.policy_seq}")
     return problems

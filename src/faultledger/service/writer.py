@@ -33,7 +33,12 @@ from faultledger.domain.events import (
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Effect, Projector, Transition
-from faultledger.errors import FaultLedgerError, LedgerClosedError, StoreError
+from faultledger.errors import (
+    FaultLedgerError,
+    LedgerClosedError,
+    StoreError,
+    WriteConflictError,
+)
 from faultledger.service.results import ClearResult, ReportResult
 from faultledger.store import event_log, projections
 from faultledger.store.database import Database, WriteConnection
@@ -156,6 +161,7 @@ class Writer:
         self._last_batch = 1
         self._closed = False
         self._policy_checked: Policy | None = None
+        self._head: tuple[int, str] | None = None
         self.commits = 0
 
     def submit(self, command: Command) -> Any:
@@ -241,37 +247,62 @@ class Writer:
             self._connection.close()
 
     def _commit(self, group: list[_Pending]) -> None:
-        projector = self.projector
-        projector.stage()
-        batch = _Batch(projector, time.time_ns())
+        """Commit one group; after a concurrent append by another process, retry once."""
         try:
-            with self._connection.transaction() as conn:
-                stored_seq, head_hash = event_log.head(conn)
-                batch.transitions.extend(self._catch_up(conn, stored_seq))
-                ids = [p.command.event_id for p in group
-                       if isinstance(p.command, Report) and p.command.explicit_id]
-                known = event_log.existing_event_ids(conn, ids)
-                for pending in group:
-                    pending.result = self._build(pending.command, batch, known, conn)
-                if batch.records or batch.transitions:
-                    head_hash = event_log.append(conn, batch.records, head_hash)
-                    projections.save(conn, projector.staged_faults(), batch.transitions,
-                                     projections.Checkpoint(projector.seq, head_hash))
+            try:
+                batch = self._write(group)
+            except WriteConflictError:
+                self._head = None
+                batch = self._write(group)
         except FaultLedgerError as error:
-            projector.rollback()
+            self._head = None
             self._fail(group, error)
             return
-        except Exception as error:  # a bug must not kill the writer thread
-            log.exception("writer failed on a batch of %d commands", len(group))
-            projector.rollback()
+        except Exception as error:  # a bug must not leave callers waiting forever
+            log.exception("commit failed on a batch of %d commands", len(group))
+            self._head = None
             self._fail(group, StoreError(f"internal error while writing: {error!r}"))
             return
-        projector.commit()
         self.commits += 1
         if batch.notifications:
             self._announce(batch.notifications)
         for pending in group:
             pending.done = True
+
+    def _write(self, group: list[_Pending]) -> _Batch:
+        """Build, append and project one group in one transaction; the projector is staged
+        and rolled back unless the commit succeeds.
+
+        The head of the log (seq, hash) is remembered from the last commit instead of being
+        read each time; if another process appended meanwhile, inserting our seq fails with
+        a conflict and ``_commit`` retries after re-reading the head and catching up.
+        """
+        projector = self.projector
+        projector.stage()
+        batch = _Batch(projector, time.time_ns())
+        try:
+            with self._connection.transaction() as conn:
+                if (self._head is None or self._head[0] != projector.seq
+                        or any(isinstance(p.command, CatchUp) for p in group)):
+                    self._head = event_log.head(conn)
+                    batch.transitions.extend(self._catch_up(conn, self._head[0]))
+                ids = [p.command.event_id for p in group
+                       if isinstance(p.command, Report) and p.command.explicit_id]
+                known = event_log.existing_event_ids(conn, ids)
+                for pending in group:
+                    pending.result = self._build(pending.command, batch, known, conn)
+                head_hash = self._head[1]
+                if batch.records or batch.transitions:
+                    head_hash = event_log.append(conn, batch.records, head_hash)
+                    projections.save(conn, projector.staged_faults(), batch.transitions,
+                                     projections.Checkpoint(projector.seq, head_hash,
+                                                            projector.policy_seq))
+        except BaseException:
+            projector.rollback()
+            raise
+        projector.commit()
+        self._head = (projector.seq, head_hash)
+        return batch
 
     @staticmethod
     def _fail(group: list[_Pending], error: FaultLedgerError) -> None:

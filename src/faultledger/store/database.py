@@ -17,6 +17,7 @@ from faultledger.errors import (
     DatabaseReadOnlyError,
     NotADatabaseError,
     StoreError,
+    WriteConflictError,
 )
 
 BUSY_TIMEOUT_MS = 5_000
@@ -137,6 +138,8 @@ _MESSAGES: tuple[tuple[str, type[StoreError], str], ...] = (
 def classify(url: str, error: BaseException) -> StoreError:
     text = str(getattr(error, "orig", None) or error)
     where = f"database {describe(url)}"
+    if isinstance(error, sqlite3.IntegrityError | exc.IntegrityError):
+        return WriteConflictError(f"{where}: concurrent append ({text})")
     for needle, kind, message in _MESSAGES:
         if needle in text.lower():
             return kind(f"{where} {message}")

@@ -9,7 +9,7 @@ from typing import Any
 
 from sqlalchemy import Connection, Select, func, select
 
-from faultledger.domain.events import LogRecord, PolicyChanged, decode
+from faultledger.domain.events import LogRecord, PolicyChanged, UnknownRecordError, decode
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
 from faultledger.store import fastpath
 from faultledger.store.schema import events
@@ -130,17 +130,14 @@ def last_seq_recorded_by(conn: Connection, recorded_at_ns: int) -> int:
     return int(first_later) - 1
 
 
-def last_policy(conn: Connection, upto_seq: int) -> PolicyChanged | None:
-    row = conn.execute(
-        select(events)
-        .where(events.c.kind == PolicyChanged.kind, events.c.seq <= upto_seq)
-        .order_by(events.c.seq.desc())
-        .limit(1)
-    ).first()
-    if row is None:
+def policy_at(conn: Connection, seq: int) -> PolicyChanged | None:
+    """The policy_changed record at ``seq`` (the checkpoint names it), None for seq 0."""
+    if seq <= 0:
         return None
-    event = _to_record(row).event
-    assert isinstance(event, PolicyChanged)
+    row = conn.execute(select(events).where(events.c.seq == seq)).first()
+    event = None if row is None else _to_record(row).event
+    if not isinstance(event, PolicyChanged):
+        raise UnknownRecordError(f"record {seq} named as the policy in force is not a policy")
     return event
 
 

@@ -48,7 +48,7 @@ class Prepared:
 
 @lru_cache(maxsize=64)
 def prepare(statement: ClauseElement, dialect: Dialect) -> Prepared:
-    compiled = statement.compile(dialect=dialect)
+    compiled: Any = statement.compile(dialect=dialect)  # a SQLCompiler for these statements
     order = tuple(compiled.positiontup or ()) if compiled.positional else None
     defaults = {k: v for k, v in compiled.params.items() if v is not None}
     return Prepared(str(compiled), order, defaults)

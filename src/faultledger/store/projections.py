@@ -25,6 +25,7 @@ _INSERT_TRANSITION = transitions.insert()
 class Checkpoint:
     seq: int
     hash: str
+    policy_seq: int = 0
 
 
 def _fault_row(fault: Fault) -> dict[str, Any]:
@@ -85,9 +86,12 @@ def _transition(row: Any) -> Transition:
 
 def load_checkpoint(conn: Connection) -> Checkpoint:
     row = conn.execute(
-        select(checkpoints.c.seq, checkpoints.c.hash).where(checkpoints.c.name == CHECKPOINT)
+        select(checkpoints.c.seq, checkpoints.c.hash, checkpoints.c.policy_seq)
+        .where(checkpoints.c.name == CHECKPOINT)
     ).first()
-    return Checkpoint(0, GENESIS_HASH) if row is None else Checkpoint(int(row.seq), row.hash)
+    if row is None:
+        return Checkpoint(0, GENESIS_HASH)
+    return Checkpoint(int(row.seq), row.hash, int(row.policy_seq))
 
 
 def load_faults(conn: Connection) -> dict[str, Fault]:
@@ -112,7 +116,8 @@ def save(
     fastpath.execute_many(conn, upsert(faults, dialect), [_fault_row(f) for f in changed])
     fastpath.execute_many(conn, _INSERT_TRANSITION, [_transition_row(t) for t in new_transitions])
     fastpath.execute_many(conn, upsert(checkpoints, dialect),
-                          [{"name": CHECKPOINT, "seq": checkpoint.seq, "hash": checkpoint.hash}])
+                          [{"name": CHECKPOINT, "seq": checkpoint.seq, "hash": checkpoint.hash,
+                            "policy_seq": checkpoint.policy_seq}])
 
 
 def replace_all(

@@ -34,9 +34,7 @@ events = Table(
     Column("hash", String(64), nullable=False),
 )
 Index("ix_events_fault_code_seq", events.c.fault_code, events.c.seq)
-Index("ix_events_kind_seq", events.c.kind, events.c.seq)
 Index("ix_events_occurred_at", events.c.occurred_at_ns)
-Index("ix_events_recorded_at", events.c.recorded_at_ns)
 
 faults = Table(
     "faults",
@@ -74,8 +72,11 @@ checkpoints = Table(
     Column("name", String(40), primary_key=True),
     Column("seq", BigInteger, nullable=False),
     Column("hash", String(64), nullable=False),
+    Column("policy_seq", BigInteger, nullable=False),
 )
-"""``projection`` row: the seq the projections include and the hash of that record.
+"""``projection`` row: the seq the projections include, the hash of that record, and the seq
+of the policy_changed record in force (so startup finds the policy without a log scan).
 
 The hash anchors the head of the chain, so deleting the newest records is detected too.
+Every index on ``events`` costs each append; only the ones queries need exist.
 """
