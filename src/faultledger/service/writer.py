@@ -15,7 +15,7 @@ import time
 import uuid
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from sqlalchemy import Connection
@@ -92,12 +92,20 @@ class Exclusive:
 Command = Report | Clear | ConfirmOverdue | ReclassifyHealed | RecordPolicy | CatchUp | Exclusive
 
 
+def _held_lock() -> threading.Lock:
+    lock = threading.Lock()
+    lock.acquire()
+    return lock
+
+
 @dataclass(slots=True)
 class _Pending:
     command: Command
     done: bool = False
     result: Any = None
     error: BaseException | None = None
+    wake: threading.Lock = field(default_factory=_held_lock)
+    """Released once: when the command is answered, or when its caller is made leader."""
 
 
 class _Batch:
@@ -135,8 +143,8 @@ class Writer:
     Group commit without a writer thread (leader/follower): a caller queues its command;
     if no commit is running it becomes the leader and commits everything queued, on its own
     thread, until its own command is done; callers arriving meanwhile queue up and are
-    committed together by the next leader. A lone reporter pays no thread hand-off; many
-    reporters share each fsync.
+    committed together by the next leader, whom the finishing leader wakes. A lone reporter
+    pays no thread hand-off; many reporters share each fsync.
     """
 
     def __init__(
@@ -154,8 +162,9 @@ class Writer:
         self._announce = announce
         self._connection = WriteConnection(db)
         self._queue: deque[_Pending] = deque()
-        self._turn = threading.Condition()
-        self._arrived = threading.Condition(self._turn._lock)  # type: ignore[attr-defined]
+        self._mutex = threading.Lock()
+        self._arrived = threading.Condition(self._mutex)
+        self._idle = threading.Condition(self._mutex)
         self._leading = False
         self._gathering = False
         self._last_batch = 1
@@ -167,38 +176,43 @@ class Writer:
     def submit(self, command: Command) -> Any:
         """Queue a command and return its result once it is durable (or failed)."""
         pending = _Pending(command)
-        with self._turn:
+        with self._mutex:
             if self._closed:
                 raise LedgerClosedError("the ledger is closed")
             self._queue.append(pending)
             if self._gathering:
                 self._arrived.notify()
-            while self._leading and not pending.done:
-                self._turn.wait()
-            if not pending.done:
-                self._leading = True
+            follow = self._leading
+            self._leading = True
+        if follow:
+            pending.wake.acquire()  # answered, or handed the leadership
         if not pending.done:
-            try:
-                self._lead(pending)
-            finally:
-                with self._turn:
-                    self._leading = False
-                    self._turn.notify_all()
+            self._lead(pending)
         if pending.error is not None:
             raise pending.error
         return pending.result
 
     def _lead(self, own: _Pending) -> None:
-        while not own.done:
-            with self._turn:
-                self._gather()
-                count = min(len(self._queue), self.max_batch)
-                batch = [self._queue.popleft() for _ in range(count)]
-                self._last_batch = count
-            for group in _split_exclusive(batch):
-                self._commit(group)
-            with self._turn:
-                self._turn.notify_all()  # wake the callers this commit answered
+        """Commit queued groups until ``own`` is done, then hand over to the next in line."""
+        try:
+            while not own.done:
+                with self._mutex:
+                    self._gather()
+                    count = min(len(self._queue), self.max_batch)
+                    batch = [self._queue.popleft() for _ in range(count)]
+                    self._last_batch = count
+                for group in _split_exclusive(batch):
+                    self._commit(group)
+                for pending in batch:
+                    if pending is not own:
+                        pending.wake.release()
+        finally:
+            with self._mutex:
+                if self._queue:
+                    self._queue[0].wake.release()
+                else:
+                    self._leading = False
+                    self._idle.notify_all()
 
     def _gather(self) -> None:
         """Wait up to GATHER_WAIT_S for as many commands as the last commit carried.
@@ -222,29 +236,12 @@ class Writer:
             self._gathering = False
 
     def close(self) -> None:
-        """Refuse new commands, let queued ones finish, release the connection."""
-        with self._turn:
+        """Refuse new commands, let the queued ones commit, release the connection."""
+        with self._mutex:
             self._closed = True
-            while self._leading or self._queue:
-                if not self._leading:
-                    self._leading = True
-                    break
-                self._turn.wait()
-            else:
-                self._connection.close()
-                return
-        try:
-            while self._queue:
-                with self._turn:
-                    batch = list(self._queue)
-                    self._queue.clear()
-                for group in _split_exclusive(batch):
-                    self._commit(group)
-        finally:
-            with self._turn:
-                self._leading = False
-                self._turn.notify_all()
-            self._connection.close()
+            while self._leading:
+                self._idle.wait()
+        self._connection.close()
 
     def _commit(self, group: list[_Pending]) -> None:
         """Commit one group; after a concurrent append by another process, retry once."""
