@@ -270,7 +270,7 @@ class FaultLedger:
     def subscribe(self, callback: Callback) -> Subscription:
         """Call ``callback(notification)`` after each announced change is durable.
 
-        Callbacks run on the writer thread, in log order, before the report is answered:
+        Callbacks run on the committing thread, in log order, before the report is answered:
         keep them short (hand heavy work to a queue).
         """
         subscription = Subscription(self, callback)

@@ -1,10 +1,10 @@
-"""The single writer: turns queued commands into records and commits them in groups.
+"""The single write path: queued commands become records committed in groups.
 
-Every reporting thread enqueues a command and waits; the writer thread takes everything
-queued (up to ``max_batch``), applies it to the projector, appends the records and the
-changed projections in ONE transaction, and only then answers the waiting callers and
-announces the changes. Many concurrent reports therefore share one fsync (group commit),
-and nothing is acknowledged before it is durable.
+Every reporting thread enqueues a command and waits; one of them at a time (the leader)
+takes everything queued (up to ``max_batch``), applies it to the projector, appends the
+records and the changed projections in ONE transaction, and only then answers the waiting
+callers and announces the changes. Many concurrent reports therefore share one fsync (group
+commit), and nothing is acknowledged before it is durable.
 """
 
 from __future__ import annotations

@@ -80,7 +80,7 @@ class Database:
 
 
 class WriteConnection:
-    """The writer thread's long-lived connection: no pool checkout per group commit."""
+    """The writer's long-lived connection: no pool checkout per group commit."""
 
     def __init__(self, db: Database) -> None:
         self._db = db
