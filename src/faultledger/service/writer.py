@@ -270,9 +270,10 @@ class Writer:
         """Build, append and project one group in one transaction; the projector is staged
         and rolled back unless the commit succeeds.
 
-        The head of the log (seq, hash) is remembered from the last commit instead of being
-        read each time; if another process appended meanwhile, inserting our seq fails with
-        a conflict and ``_commit`` retries after re-reading the head and catching up.
+        The head of the log (seq, hash) is remembered from the last commit and re-read only
+        when another connection committed since (then its records are applied first, so
+        decisions such as "Fault not found" see them). Should an append still collide,
+        ``_commit`` retries after re-reading the head.
         """
         projector = self.projector
         projector.stage()
@@ -280,16 +281,17 @@ class Writer:
         try:
             with self._connection.transaction() as conn:
                 if (self._head is None or self._head[0] != projector.seq
+                        or self._connection.others_committed(conn)
                         or any(isinstance(p.command, CatchUp) for p in group)):
                     self._head = event_log.head(conn)
-                    batch.transitions.extend(self._catch_up(conn, self._head[0]))
+                    self._catch_up(conn, self._head[0])
                 ids = [p.command.event_id for p in group
                        if isinstance(p.command, Report) and p.command.explicit_id]
                 known = event_log.existing_event_ids(conn, ids)
                 for pending in group:
                     pending.result = self._build(pending.command, batch, known, conn)
                 head_hash = self._head[1]
-                if batch.records or batch.transitions:
+                if batch.records:
                     head_hash = event_log.append(conn, batch.records, head_hash)
                     projections.save(conn, projector.staged_faults(), batch.transitions,
                                      projections.Checkpoint(projector.seq, head_hash,
@@ -312,16 +314,17 @@ class Writer:
                 pending.error = error
             pending.done = True
 
-    def _catch_up(self, conn: Connection, stored_seq: int) -> list[Transition]:
+    def _catch_up(self, conn: Connection, stored_seq: int) -> None:
+        """Apply records another process appended; it saved their projections already."""
         projector = self.projector
         if stored_seq == projector.seq:
-            return []
+            return
         if stored_seq < projector.seq:
             raise StoreError(
                 f"the log ends at seq {stored_seq} but this process has applied {projector.seq}: "
                 "the database was replaced or truncated underneath; restart faultledger"
             )
-        return projector.apply_all(event_log.read(conn, after_seq=projector.seq))
+        projector.apply_all(event_log.read(conn, after_seq=projector.seq))
 
     def _ensure_policy(self, batch: _Batch) -> None:
         """Record the effective policy before the first record that depends on it."""

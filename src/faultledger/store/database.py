@@ -85,6 +85,18 @@ class WriteConnection:
     def __init__(self, db: Database) -> None:
         self._db = db
         self._conn: Connection | None = None
+        self._data_version: int | None = None
+
+    def others_committed(self, conn: Connection) -> bool:
+        """Whether another connection committed since this one last looked (SQLite's
+        ``PRAGMA data_version``); always True where the database cannot tell cheaply."""
+        if self._db.dialect != "sqlite":
+            return True
+        driver: Any = conn.connection.driver_connection
+        version = int(driver.execute("PRAGMA data_version").fetchone()[0])
+        changed = version != self._data_version
+        self._data_version = version
+        return changed
 
     @contextlib.contextmanager
     def transaction(self) -> Iterator[Connection]:
@@ -101,6 +113,7 @@ class WriteConnection:
             raise
 
     def close(self) -> None:
+        self._data_version = None
         if self._conn is not None:
             with contextlib.suppress(Exception):
                 self._conn.close()
