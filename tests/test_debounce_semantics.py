@@ -1,14 +1,14 @@
-"""SPEC §4.1-4.3: policy sanitising, per-source overrides, the debounce state machine, field rules."""
+"""SPEC §4.1-4.3: policy sanitising, per-source overrides, debounce state machine, field rules."""
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta, timezone
 
 import pytest
 
 from faultledger import Fault, FaultStatus, Policy
 
-T0 = datetime(2026, 11, 21, 22, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 CODE = "MOTOR_OVERHEAT"
 
 PF = FaultStatus.PREFAILED
@@ -692,7 +692,7 @@ def test_times_are_returned_as_utc(open_ledger) -> None:
     f = fault(ledger)
     for moment in (f.first_occurred, f.last_occurred, f.last_passed):
         assert moment.utcoffset() == timedelta(0)
-    assert f.first_occurred == datetime(2026, 11, 21, 23, 30, tzinfo=timezone.utc)
+    assert f.first_occurred == datetime(2026, 11, 21, 23, 30, tzinfo=UTC)
 
 
 def test_sub_second_report_time_is_kept(open_ledger) -> None:

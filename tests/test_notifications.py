@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 import pytest
 
 from faultledger import Fault, FaultStatus, Policy
 
-T0 = datetime(2026, 11, 21, 22, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 CODE = "MOTOR_OVERHEAT"
 
 CONFIRMED = "fault_confirmed"

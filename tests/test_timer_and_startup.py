@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 import pytest
 
@@ -10,7 +10,7 @@ from faultledger import Fault, FaultStatus, Policy
 
 # Report times lie in the future on purpose: a ledger that also checks timers against the wall
 # clock can then never confirm these faults on its own, so only run_timers(now=...) decides.
-T0 = datetime(2099, 11, 21, 22, 0, tzinfo=timezone.utc)
+T0 = datetime(2099, 11, 21, 22, 0, tzinfo=UTC)
 CODE = "MOTOR_OVERHEAT"
 
 FAULT_FIELDS = (

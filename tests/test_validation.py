@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import re
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta, timezone
 
 import pytest
 
 from faultledger import Fault, FaultStatus, Policy
 
-T0 = datetime(2026, 11, 21, 22, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 CODE = "MOTOR_OVERHEAT"
 UNKNOWN = "NO_SUCH_FAULT"
 
