@@ -257,3 +257,19 @@ def test_reopened_ledger_announces_only_new_changes(open_ledger, notifications) 
     apply_step(reopened, "F", at(10))
 
     assert [(n.event_type, n.fault.fault_code) for n in received] == [(UPDATED, CODE)]
+
+
+def test_a_subscriber_that_reports_synchronously_is_refused_not_deadlocked(
+    open_ledger,
+) -> None:
+    ledger = open_ledger(Policy())
+    answers: list[tuple[bool, str]] = []
+
+    def reentrant(_n: object) -> None:
+        result = ledger.report("SECOND", "FAILED", 2, "", "/cb")
+        answers.append((result.accepted, result.message))
+
+    ledger.subscribe(reentrant)
+    assert ledger.report("FIRST", "FAILED", 2, "", "/x").accepted
+    assert answers and answers[0][0] is False and "subscriber callback" in answers[0][1]
+    assert ledger.get_fault("SECOND") is None

@@ -168,6 +168,7 @@ class Writer:
         self._leading = False
         self._gathering = False
         self._last_batch = 1
+        self._leader: int | None = None
         self._closed = False
         self._policy_checked: Policy | None = None
         self._head: tuple[int, str] | None = None
@@ -175,6 +176,10 @@ class Writer:
 
     def submit(self, command: Command) -> Any:
         """Queue a command and return its result once it is durable (or failed)."""
+        if self._leader == threading.get_ident():
+            raise FaultLedgerError(
+                "a subscriber callback cannot report or clear synchronously (the commit that "
+                "called it is still running); hand the call to another thread")
         pending = _Pending(command)
         with self._mutex:
             if self._closed:
@@ -194,6 +199,7 @@ class Writer:
 
     def _lead(self, own: _Pending) -> None:
         """Commit queued groups until ``own`` is done, then hand over to the next in line."""
+        self._leader = threading.get_ident()
         try:
             while not own.done:
                 with self._mutex:
@@ -207,6 +213,7 @@ class Writer:
                     if pending is not own:
                         pending.wake.release()
         finally:
+            self._leader = None
             with self._mutex:
                 if self._queue:
                     self._queue[0].wake.release()
