@@ -1,0 +1,301 @@
+"""Durable ingest of FaultLedger.report vs raw sqlite3 fsync-per-row and eventsourcing 9.5.6."""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sqlite3
+import statistics
+import subprocess
+import sys
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from _common import (
+    BENCH_DIR,
+    header,
+    percentile,
+    plan,
+    ratio,
+    report_concurrently,
+    scratch_dir,
+    url_for,
+    verdict,
+)
+from faultledger import FaultLedger, Policy
+
+ES_VERSION = "9.5.6"
+ES_VENV = BENCH_DIR / ".venv-eventsourcing"
+
+Plan = list[tuple[str, str, str]]
+
+
+@dataclass(frozen=True)
+class Run:
+    name: str
+    reports: int
+    records: int
+    seconds: float
+    commits: int
+    latencies: list[float]
+    cpu_seconds: float = 0.0
+
+    @property
+    def rate(self) -> float:
+        return self.reports / self.seconds
+
+    def latency_line(self) -> str:
+        if not self.latencies:
+            return ""
+        return (f"latency per report: mean {statistics.fmean(self.latencies) * 1e3:.2f} ms, "
+                f"p50 {percentile(self.latencies, 0.5) * 1e3:.2f} ms, "
+                f"p99 {percentile(self.latencies, 0.99) * 1e3:.2f} ms")
+
+
+# -- FaultLedger ----------------------------------------------------------------------------------
+def run_ledger(work: Plan, threads: int, db: Path) -> Run:
+    ledger = FaultLedger.open(url_for(db), policy=Policy())
+    try:
+        # Warm-up outside the timing: records the policy, compiles the SQLAlchemy statements.
+        ledger.report("BENCH_WARMUP", "FAILED", severity=2, source_id="/bench/warmup")
+        seq0, commits0 = ledger.last_seq, ledger._writer.commits
+        cpu0 = time.process_time()
+        seconds, rejected, latencies = report_concurrently(ledger, work, threads)
+        cpu = time.process_time() - cpu0
+        if rejected:
+            raise SystemExit(f"{rejected} reports were rejected")
+        return Run(f"FaultLedger, {threads} thread{'s' if threads > 1 else ''}", len(work),
+                   ledger.last_seq - seq0, seconds, ledger._writer.commits - commits0, latencies,
+                   cpu)
+    finally:
+        ledger.close()
+
+
+# -- (a) raw sqlite3, one commit per row ---------------------------------------------------------
+RAW_SCHEMA = """
+CREATE TABLE events (
+    seq INTEGER PRIMARY KEY,
+    event_id TEXT NOT NULL UNIQUE,
+    kind TEXT NOT NULL,
+    fault_code TEXT,
+    source_id TEXT,
+    payload TEXT NOT NULL,
+    occurred_at_ns INTEGER NOT NULL,
+    recorded_at_ns INTEGER NOT NULL,
+    hash TEXT NOT NULL
+)
+"""
+
+
+def run_raw(work: Plan, db: Path) -> Run:
+    conn = sqlite3.connect(db, isolation_level=None)
+    mode = conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+    conn.execute("PRAGMA synchronous = FULL")
+    sync = conn.execute("PRAGMA synchronous").fetchone()[0]
+    assert mode == "wal" and sync == 2, (mode, sync)
+    conn.execute(RAW_SCHEMA)
+    insert = ("INSERT INTO events (seq, event_id, kind, fault_code, source_id, payload, "
+              "occurred_at_ns, recorded_at_ns, hash) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)")
+    # Warm-up row outside the timing (the first commit also creates the WAL file).
+    conn.execute(insert, (0, "warmup", "warmup", None, None, "{}", 0, 0, "0" * 64))
+    prev = "0" * 64
+    latencies: list[float] = []
+    cpu0 = time.process_time()
+    start = time.perf_counter()
+    for seq, (code, kind, source) in enumerate(work, 1):
+        t0 = time.perf_counter()
+        payload = json.dumps({"description": "bench", "event_type": kind, "fault_code": code,
+                              "severity": 2, "source_id": source},
+                             sort_keys=True, separators=(",", ":"))
+        now = time.time_ns()
+        prev = hashlib.sha256(f"{prev}{seq}{payload}".encode()).hexdigest()
+        conn.execute("BEGIN IMMEDIATE")
+        conn.execute(insert, (seq, str(uuid.uuid4()), "fault_reported", code, source, payload,
+                              now, now, prev))
+        conn.execute("COMMIT")
+        latencies.append(time.perf_counter() - t0)
+    seconds = time.perf_counter() - start
+    cpu = time.process_time() - cpu0
+    conn.close()
+    return Run("(a) raw sqlite3, commit per row", len(work), len(work), seconds, len(work),
+               latencies, cpu)
+
+
+# -- (b) eventsourcing in its own venv -----------------------------------------------------------
+ES_CHILD = r'''
+import json, os, sqlite3, sys, time
+plan_file, db = sys.argv[1], sys.argv[2]
+os.environ["PERSISTENCE_MODULE"] = "eventsourcing.sqlite"
+os.environ["SQLITE_DBNAME"] = db
+import eventsourcing
+from eventsourcing.application import Application
+from eventsourcing.domain import Aggregate, event
+
+
+class Fault(Aggregate):
+    @event("Created")
+    def __init__(self, code: str, kind: str, severity: int, source: str) -> None:
+        self.code = code
+        self.reports = 1
+
+    @event("Reported")
+    def report(self, kind: str, severity: int, source: str) -> None:
+        self.reports += 1
+
+
+work = json.load(open(plan_file))
+app = Application()
+with app.recorder.datastore.get_connection(commit=False) as conn:  # what its pool configured
+    raw = conn._sqlite_conn
+    journal = raw.execute("PRAGMA journal_mode").fetchone()[0]
+    synchronous = raw.execute("PRAGMA synchronous").fetchone()[0]
+warm = Fault("BENCH_WARMUP", "FAILED", 2, "/bench/warmup")
+app.save(warm)
+faults = {}
+latencies = []
+start = time.perf_counter()
+for code, kind, source in work:
+    t0 = time.perf_counter()
+    fault = faults.get(code)
+    if fault is None:
+        fault = faults[code] = Fault(code, kind, 2, source)
+    else:
+        fault.report(kind, 2, source)
+    app.save(fault)  # one event, one transaction, one commit
+    latencies.append(time.perf_counter() - t0)
+seconds = time.perf_counter() - start
+stored = sqlite3.connect(db).execute("SELECT count(*) FROM stored_events").fetchone()[0]
+app.close()
+print(json.dumps({"version": eventsourcing.__version__ if hasattr(eventsourcing, "__version__")
+                  else "?", "seconds": seconds, "reports": len(work), "stored": stored - 1,
+                  "journal_mode": journal, "synchronous": synchronous,
+                  "latencies": latencies}))
+'''
+
+
+def es_python() -> Path:
+    """The eventsourcing venv's interpreter, created with ``python3 -m venv`` when missing."""
+    python = ES_VENV / "bin" / "python"
+    check = [str(python), "-c", "import importlib.metadata as m; print(m.version('eventsourcing'))"]
+    if python.exists():
+        found = subprocess.run(check, capture_output=True, text=True, check=False)
+        if found.stdout.strip() == ES_VERSION:
+            return python
+    print(f"   creating {ES_VENV} with eventsourcing=={ES_VERSION} ...", flush=True)
+    subprocess.run(["python3", "-m", "venv", str(ES_VENV)], check=True)
+    subprocess.run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+                    f"eventsourcing=={ES_VERSION}"], check=True)
+    return python
+
+
+def run_eventsourcing(work: Plan, workdir: Path) -> tuple[Run, dict[str, Any]]:
+    python = es_python()
+    plan_file = workdir / "plan.json"
+    plan_file.write_text(json.dumps(work))
+    child = workdir / "es_child.py"
+    child.write_text(ES_CHILD)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    done = subprocess.run([str(python), str(child), str(plan_file), str(workdir / "es.db")],
+                          capture_output=True, text=True, check=False, env=env, cwd=workdir)
+    if done.returncode != 0:
+        raise SystemExit(f"eventsourcing child failed:\n{done.stderr}")
+    out: dict[str, Any] = json.loads(done.stdout)
+    run = Run(f"(b) eventsourcing {ES_VERSION}, save per report", int(out["reports"]),
+              int(out["stored"]), float(out["seconds"]), int(out["reports"]),
+              [float(x) for x in out["latencies"]])
+    return run, out
+
+
+# -- main ----------------------------------------------------------------------------------------
+def show(run: Run) -> None:
+    extra = ""
+    if run.commits and run.commits != run.reports:
+        extra = (f", {run.commits} commits ({run.records / run.commits:.1f} records/commit, "
+                 f"{run.seconds / run.commits * 1e3:.2f} ms per commit cycle)")
+    print(f"   {run.name:<42} {run.rate:>9,.0f} reports/s  "
+          f"({run.reports:,} reports, {run.records:,} records stored, {run.seconds:.2f} s{extra})")
+    if run.latencies:
+        print(f"   {'':<42} {run.latency_line()}")
+    if run.cpu_seconds:
+        print(f"   {'':<42} process CPU per report: {run.cpu_seconds / run.reports * 1e3:.3f} ms")
+
+
+def median_run(runs: list[Run]) -> Run:
+    """The run with the median rate (the machine is shared: single runs are noisy)."""
+    return sorted(runs, key=lambda r: r.rate)[len(runs) // 2]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true",
+                        help="small sizes (500 reports, one round)")
+    parser.add_argument("--reports", type=int, default=None,
+                        help="reports per configuration (default 3000, --quick 500)")
+    parser.add_argument("--codes", type=int, default=200)
+    parser.add_argument("--threads", type=int, default=8)
+    parser.add_argument("--rounds", type=int, default=None,
+                        help="rounds of every configuration, median kept (default 3, --quick 1)")
+    args = parser.parse_args()
+    n = args.reports or (500 if args.quick else 3000)
+    rounds = args.rounds or (1 if args.quick else 3)
+    work = plan(n, args.codes)
+    header(f"ingest: {n:,} reports over {args.codes} codes per configuration, median of "
+           f"{rounds} round(s) (WAL, synchronous=FULL: every acknowledged report is fsynced)")
+
+    raws: list[Run] = []
+    ess: list[Run] = []
+    ones: list[Run] = []
+    manys: list[Run] = []
+    es_info: dict[str, Any] = {}
+    for r in range(rounds):
+        # Interleaved rounds: a burst of load from other users hits every configuration alike.
+        with scratch_dir("ingest-") as workdir:
+            raws.append(run_raw(work, workdir / "raw.db"))
+            es, es_info = run_eventsourcing(work, workdir)
+            ess.append(es)
+            ones.append(run_ledger(work, 1, workdir / "ledger1.db"))
+            manys.append(run_ledger(work, args.threads, workdir / "ledgerN.db"))
+        print(f"   round {r + 1}: " + ", ".join(
+            f"{x[-1].rate:,.0f}/s" for x in (raws, ess, ones, manys)), flush=True)
+    raw, es, one, many = (median_run(x) for x in (raws, ess, ones, manys))
+    print()
+    for run in (raw, es):
+        show(run)
+    print(f"   {'':<42} eventsourcing's SQLite pool: journal_mode={es_info['journal_mode']}, "
+          f"synchronous={es_info['synchronous']} (2 = FULL; it sets WAL itself and leaves "
+          "synchronous at the build default)")
+    for run in (one, many):
+        show(run)
+
+    fsync_ms = statistics.median(raw.latencies) * 1e3
+    cycle_ms = many.seconds / many.commits * 1e3
+    print()
+    print(f"   commit latency, raw sqlite3 (fsync'd WAL commit of one row): median {fsync_ms:.2f} "
+          f"ms, mean {statistics.fmean(raw.latencies) * 1e3:.2f} ms")
+    print(f"   {args.threads} threads: {many.records / many.commits:.1f} records per group commit,"
+          f" one commit every {cycle_ms:.2f} ms; with {args.threads} synchronous callers at most "
+          f"{args.threads} reports share a commit, so the rate is <= {args.threads} / cycle")
+    print(f"   {'':<11}bound if a cycle cost only the fsync: {args.threads} / {fsync_ms:.2f} ms = "
+          f"{args.threads / fsync_ms * 1e3:,.0f} reports/s; the rest of the cycle is Python CPU "
+          f"({many.cpu_seconds / many.reports * 1e3:.3f} ms CPU per report on 2 cores)")
+    print()
+    checks = [
+        ("1 thread vs (a) raw sqlite3", ratio(one.rate, raw.rate), 0.5, False),
+        ("1 thread vs (b) eventsourcing", ratio(one.rate, es.rate), 1.5, False),
+        (f"{args.threads} threads vs (a) raw sqlite3", ratio(many.rate, raw.rate), 2.0, False),
+        (f"{args.threads} threads absolute (reports/s)", many.rate, 10_000.0, True),
+    ]
+    for name, value, target, absolute in checks:
+        shown = f"{value:,.0f}" if absolute else f"{value:.2f}x"
+        goal = f">= {target:,.0f}" if absolute else f">= {target:.1f}x"
+        print(f"   {name:<42} {shown:>10}   target {goal:<10} {verdict(value >= target)}")
+    sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,143 @@
+"""Replay speed of FaultLedger.rebuild over a large log vs a bare sqlite3 read + json.loads."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sqlite3
+import time
+from pathlib import Path
+
+from _common import (
+    SCRATCH,
+    header,
+    plan,
+    ratio,
+    remove_db,
+    report_concurrently,
+    scratch_dir,
+    url_for,
+    verdict,
+)
+from faultledger import FaultLedger, Policy
+
+TARGET_EVENTS_PER_S = 50_000
+
+
+def count_events(db: Path) -> int:
+    conn = sqlite3.connect(db)
+    try:
+        return int(conn.execute("SELECT count(*) FROM events").fetchone()[0])
+    except sqlite3.Error:
+        return 0
+    finally:
+        conn.close()
+
+
+def build_log(db: Path, reports: int, n_codes: int, threads: int) -> int:
+    """Fill ``db`` through the public API (many threads, large group commits); returns the
+    number of records in the log."""
+    ledger = FaultLedger.open(url_for(db), policy=Policy(), max_batch=4096)
+    try:
+        work = plan(reports, n_codes)
+        seconds, rejected, _ = report_concurrently(ledger, work, threads,
+                                                   progress_every=max(1, reports // 10))
+        if rejected:
+            raise SystemExit(f"{rejected} reports were rejected while building the log")
+        print(f"   built {ledger.last_seq:,} records in {seconds:.1f} s "
+              f"({reports / seconds:,.0f} reports/s, {threads} threads, "
+              f"{ledger._writer.commits:,} commits)", flush=True)
+        return ledger.last_seq
+    finally:
+        ledger.close()
+
+
+def ensure_log(db: Path, reports: int, n_codes: int, threads: int) -> int:
+    """Reuse ``db`` when it already holds at least ``reports`` records, else build it."""
+    have = count_events(db) if db.exists() else 0
+    if have >= reports:
+        print(f"   reusing {db} ({have:,} records)")
+        return have
+    remove_db(db)
+    print(f"   building a log of {reports:,} reports over {n_codes:,} codes in {db} ...",
+          flush=True)
+    return build_log(db, reports, n_codes, threads)
+
+
+def baseline_read(db: Path) -> tuple[int, float]:
+    """The floor of any replay: read every row with sqlite3 and json.loads its payload."""
+    start = time.perf_counter()
+    conn = sqlite3.connect(db)
+    count = 0
+    for row in conn.execute("SELECT * FROM events ORDER BY seq"):
+        json.loads(row[5])
+        count += 1
+    conn.close()
+    return count, time.perf_counter() - start
+
+
+def payload_column(db: Path) -> int:
+    conn = sqlite3.connect(db)
+    names = [r[1] for r in conn.execute("PRAGMA table_info(events)")]
+    conn.close()
+    return names.index("payload")
+
+
+def time_rebuild(db: Path) -> tuple[int, float]:
+    ledger = FaultLedger.open(url_for(db))  # no policy: opening writes nothing
+    try:
+        start = time.perf_counter()
+        replayed = ledger.rebuild()
+        return replayed, time.perf_counter() - start
+    finally:
+        ledger.close()
+
+
+def measure(db: Path) -> None:
+    column = payload_column(db)
+    assert column == 5, f"payload is column {column}; adjust baseline_read"
+    baseline_read(db)  # warm the page cache so both sides read from memory
+    base_n, base_s = baseline_read(db)
+    replayed, seconds = time_rebuild(db)
+    rate, base_rate = replayed / seconds, base_n / base_s
+    print()
+    print(f"   baseline: sqlite3 SELECT * + json.loads   {base_rate:>12,.0f} events/s "
+          f"({base_n:,} rows in {base_s:.2f} s)")
+    print(f"   FaultLedger.rebuild()                       {rate:>12,.0f} events/s "
+          f"({replayed:,} records in {seconds:.2f} s)")
+    print()
+    print(f"   rebuild vs baseline                          {ratio(rate, base_rate):>10.2f}x")
+    print(f"   rebuild absolute (events/s)                  {rate:>10,.0f}   target >= "
+          f"{TARGET_EVENTS_PER_S:,}  {verdict(rate >= TARGET_EVENTS_PER_S)}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="100,000 reports")
+    parser.add_argument("--reports", type=int, default=None,
+                        help="reports in the log (default 1,000,000; --quick 100,000)")
+    parser.add_argument("--codes", type=int, default=5000)
+    parser.add_argument("--threads", type=int, default=48,
+                        help="reporting threads used to build the log")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="build the log at PATH and keep it (reused when it is already "
+                             "large enough; startup.py --db PATH reads it)")
+    args = parser.parse_args()
+    reports = args.reports or (100_000 if args.quick else 1_000_000)
+    header(f"rebuild: replay of a {reports:,}-report log over {args.codes:,} codes")
+    if args.keep is not None:
+        db = args.keep.resolve()
+        db.parent.mkdir(parents=True, exist_ok=True)
+        ensure_log(db, reports, args.codes, args.threads)
+        measure(db)
+        print(f"   kept {db} (delete it when done: rm {db}*)")
+        return
+    SCRATCH.mkdir(parents=True, exist_ok=True)
+    with scratch_dir("rebuild-") as workdir:
+        db = workdir / "log.db"
+        build_log(db, reports, args.codes, args.threads)
+        measure(db)
+
+
+if __name__ == "__main__":
+    main()
