@@ -1,41 +1,50 @@
-"""Event records of the log: small immutable values with a schema version, upcast on read."""
+"""Event records of the log: small immutable values with a schema version, upcast on read.
+
+NamedTuples rather than frozen dataclasses: a replay creates millions of them.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from datetime import datetime
-from typing import Any, ClassVar
+from typing import Any, NamedTuple
 
 from faultledger.domain.clock import from_ns
-from faultledger.domain.types import EventType
+from faultledger.domain.types import EVENT_TYPE_NAMES, EventType
 
 SCHEMA_VERSION = 1
 """Version written for every new record; older versions are upcast by ``decode``."""
 
 
-@dataclass(frozen=True, slots=True)
-class FaultReported:
-    kind: ClassVar[str] = "fault_reported"
+FAULT_REPORTED = "fault_reported"
+FAULT_CLEARED = "fault_cleared"
+FAULT_CONFIRMED_BY_TIMER = "fault_confirmed_by_timer"
+POLICY_CHANGED = "policy_changed"
+RECLASSIFIED_ON_STARTUP = "reclassified_on_startup"
+
+
+class FaultReported(NamedTuple):
     fault_code: str
     event_type: EventType
     severity: int
     description: str
     source_id: str
 
+    @property
+    def kind(self) -> str:
+        return FAULT_REPORTED
+
     def payload(self) -> dict[str, Any]:
         return {
             "fault_code": self.fault_code,
-            "event_type": self.event_type.name,
+            "event_type": EVENT_TYPE_NAMES[self.event_type],
             "severity": self.severity,
             "description": self.description,
             "source_id": self.source_id,
         }
 
 
-@dataclass(frozen=True, slots=True)
-class FaultCleared:
-    kind: ClassVar[str] = "fault_cleared"
+class FaultCleared(NamedTuple):
     fault_code: str
     actor: str
     reason: str
@@ -44,34 +53,44 @@ class FaultCleared:
     def source_id(self) -> str:
         return self.actor
 
+    @property
+    def kind(self) -> str:
+        return FAULT_CLEARED
+
     def payload(self) -> dict[str, Any]:
         return {"fault_code": self.fault_code, "actor": self.actor, "reason": self.reason}
 
 
-@dataclass(frozen=True, slots=True)
-class FaultConfirmedByTimer:
-    kind: ClassVar[str] = "fault_confirmed_by_timer"
+class FaultConfirmedByTimer(NamedTuple):
     fault_code: str
     after_sec: float
+
+    @property
+    def kind(self) -> str:
+        return FAULT_CONFIRMED_BY_TIMER
 
     def payload(self) -> dict[str, Any]:
         return {"fault_code": self.fault_code, "after_sec": self.after_sec}
 
 
-@dataclass(frozen=True, slots=True)
-class PolicyChanged:
-    kind: ClassVar[str] = "policy_changed"
+class PolicyChanged(NamedTuple):
     policy: Mapping[str, Any]
+
+    @property
+    def kind(self) -> str:
+        return POLICY_CHANGED
 
     def payload(self) -> dict[str, Any]:
         return {"policy": dict(self.policy)}
 
 
-@dataclass(frozen=True, slots=True)
-class ReclassifiedOnStartup:
-    kind: ClassVar[str] = "reclassified_on_startup"
+class ReclassifiedOnStartup(NamedTuple):
     fault_code: str
     reason: str
+
+    @property
+    def kind(self) -> str:
+        return RECLASSIFIED_ON_STARTUP
 
     def payload(self) -> dict[str, Any]:
         return {"fault_code": self.fault_code, "reason": self.reason}
@@ -81,11 +100,11 @@ DomainEvent = (
     FaultReported | FaultCleared | FaultConfirmedByTimer | PolicyChanged | ReclassifiedOnStartup
 )
 KINDS = (
-    FaultReported.kind,
-    FaultCleared.kind,
-    FaultConfirmedByTimer.kind,
-    PolicyChanged.kind,
-    ReclassifiedOnStartup.kind,
+    FAULT_REPORTED,
+    FAULT_CLEARED,
+    FAULT_CONFIRMED_BY_TIMER,
+    POLICY_CHANGED,
+    RECLASSIFIED_ON_STARTUP,
 )
 
 
@@ -103,18 +122,22 @@ class UnknownRecordError(ValueError):
     """A record this version cannot read: an unknown kind or a newer schema version."""
 
 
+_EVENT_TYPES = {member.name: member for member in EventType}
+
+
 def _reported(p: Mapping[str, Any]) -> DomainEvent:
     return FaultReported(
-        p["fault_code"], EventType[p["event_type"]], p["severity"], p["description"], p["source_id"]
+        p["fault_code"], _EVENT_TYPES[p["event_type"]], p["severity"], p["description"],
+        p["source_id"],
     )
 
 
 _DECODERS: dict[str, Callable[[Mapping[str, Any]], DomainEvent]] = {
-    FaultReported.kind: _reported,
-    FaultCleared.kind: lambda p: FaultCleared(p["fault_code"], p["actor"], p["reason"]),
-    FaultConfirmedByTimer.kind: lambda p: FaultConfirmedByTimer(p["fault_code"], p["after_sec"]),
-    PolicyChanged.kind: lambda p: PolicyChanged(p["policy"]),
-    ReclassifiedOnStartup.kind: lambda p: ReclassifiedOnStartup(p["fault_code"], p["reason"]),
+    FAULT_REPORTED: _reported,
+    FAULT_CLEARED: lambda p: FaultCleared(p["fault_code"], p["actor"], p["reason"]),
+    FAULT_CONFIRMED_BY_TIMER: lambda p: FaultConfirmedByTimer(p["fault_code"], p["after_sec"]),
+    POLICY_CHANGED: lambda p: PolicyChanged(p["policy"]),
+    RECLASSIFIED_ON_STARTUP: lambda p: ReclassifiedOnStartup(p["fault_code"], p["reason"]),
 }
 
 Upcaster = Callable[[dict[str, Any]], dict[str, Any]]
@@ -135,18 +158,17 @@ def decode(kind: str, version: int, payload: Mapping[str, Any]) -> DomainEvent:
     decoder = _DECODERS.get(kind)
     if decoder is None:
         raise UnknownRecordError(f"unknown record kind {kind!r}")
-    data = dict(payload)
+    data = payload
     while version < SCHEMA_VERSION:
         upcast = UPCASTERS.get((kind, version))
         if upcast is None:
             raise UnknownRecordError(f"no upcaster for {kind!r} version {version}")
-        data = upcast(data)
+        data = upcast(dict(data))
         version += 1
     return decoder(data)
 
 
-@dataclass(frozen=True, slots=True)
-class LogRecord:
+class LogRecord(NamedTuple):
     """One durable record of the log, as appended or as read back."""
 
     seq: int

@@ -2,20 +2,21 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from datetime import datetime
+from typing import NamedTuple
 
 from faultledger.domain.clock import from_ns
 from faultledger.domain.types import FaultStatus
 
 
-@dataclass(frozen=True, slots=True)
-class Fault:
+class Fault(NamedTuple):
     """One fault per fault_code, aggregated over all sources (SPEC §4).
 
     Times are kept as integer nanoseconds (the log's unit); the datetime properties are the
     public view. ``last_passed_ns == 0`` means never. ``last_report_failed`` remembers whether
     the previous accepted report was FAILED, which defines activation edges for statistics.
+    A NamedTuple: immutable like a frozen dataclass, but three times cheaper to create, which
+    matters when a replay creates one per record.
     """
 
     fault_code: str

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 from faultledger.domain import debounce
 from faultledger.domain.events import (
@@ -17,11 +17,10 @@ from faultledger.domain.events import (
 from faultledger.domain.fault import Fault
 from faultledger.domain.notifications import for_status_change
 from faultledger.domain.policy import Policy
-from faultledger.domain.types import FaultStatus, NotificationType
+from faultledger.domain.types import EVENT_TYPE_NAMES, FaultStatus, NotificationType
 
 
-@dataclass(frozen=True, slots=True)
-class Transition:
+class Transition(NamedTuple):
     """A status change of one fault, caused by the record ``seq`` (from_status None: created)."""
 
     seq: int
@@ -33,8 +32,7 @@ class Transition:
     source_id: str
 
 
-@dataclass(frozen=True, slots=True)
-class Effect:
+class Effect(NamedTuple):
     """What one record did: the fault after it (None: untouched), and its announcement."""
 
     fault: Fault | None = None
@@ -169,7 +167,8 @@ class Projector:
         old_status = None if old is None else old.status
         return Effect(
             new,
-            self._transition(record, new, old_status, event.event_type.name, event.source_id),
+            self._transition(record, new, old_status, EVENT_TYPE_NAMES[event.event_type],
+                             event.source_id),
             for_status_change(old_status, new.status),
         )
 
@@ -177,7 +176,7 @@ class Projector:
         old = self.get(event.fault_code)
         if old is None:
             return _NOTHING
-        new = replace(old, status=FaultStatus.CLEARED, last_report_failed=False)
+        new = old._replace(status=FaultStatus.CLEARED, last_report_failed=False)
         self._put(new)
         transition = self._transition(record, new, old.status, "clear", event.actor)
         return Effect(new, transition, NotificationType.CLEARED)
@@ -190,10 +189,10 @@ class Projector:
         if old is None or old.status is not required:
             return _NOTHING
         if required is FaultStatus.PREFAILED:
-            new = replace(old, status=FaultStatus.CONFIRMED)
+            new = old._replace(status=FaultStatus.CONFIRMED)
             notification = NotificationType.CONFIRMED
         else:
-            new = replace(old, status=FaultStatus.CLEARED, last_report_failed=False)
+            new = old._replace(status=FaultStatus.CLEARED, last_report_failed=False)
             notification = None
         self._put(new)
         return Effect(new, self._transition(record, new, old.status, cause, source), notification)

@@ -27,6 +27,10 @@ class EventType(IntEnum):
     PASSED = 1
 
 
+EVENT_TYPE_NAMES = {member: member.name for member in EventType}
+"""EventType -> "FAILED"/"PASSED" (``Enum.name`` is a slow property on Python 3.11)."""
+
+
 class NotificationType(StrEnum):
     CONFIRMED = "fault_confirmed"
     UPDATED = "fault_updated"

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import Connection, Select, func, select
+from sqlalchemy import Connection, Integer, bindparam, func, select
 
 from faultledger.domain.events import LogRecord, PolicyChanged, UnknownRecordError, decode
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
@@ -60,35 +60,38 @@ def append(conn: Connection, records: Sequence[LogRecord], prev_hash: str) -> st
     return prev_hash
 
 
-def _to_record(row: Any) -> LogRecord:
-    return LogRecord(
-        seq=row.seq,
-        event_id=row.event_id,
-        event=decode(row.kind, row.schema_version, json.loads(row.payload)),
-        occurred_at_ns=row.occurred_at_ns,
-        recorded_at_ns=row.recorded_at_ns,
-        schema_version=row.schema_version,
-        hash=row.hash,
-    )
+_raw_decode = json.JSONDecoder().raw_decode  # payloads are canonical: no whitespace to skip
 
 
-def _chunks(conn: Connection, query: Select[Any], after: int) -> Iterator[Any]:
-    """Keyset pagination over seq so a long read holds no huge cursor or result in memory."""
+def _to_record(row: Sequence[Any]) -> LogRecord:
+    """A stored row (columns in table order) as a LogRecord; positional for replay speed."""
+    seq, event_id, kind, _code, _source, payload, occurred, recorded, version, digest = row
+    return LogRecord(seq, event_id, decode(kind, version, _raw_decode(payload)[0]), occurred,
+                     recorded, version, digest)
+
+
+_AFTER = bindparam("after", type_=Integer)
+_UPTO = bindparam("upto", type_=Integer)
+_CHUNK = bindparam("chunk", type_=Integer)
+_PAGE = select(events).where(events.c.seq > _AFTER).order_by(events.c.seq).limit(_CHUNK)
+_PAGE_UPTO = (select(events).where(events.c.seq > _AFTER, events.c.seq <= _UPTO)
+              .order_by(events.c.seq).limit(_CHUNK))
+
+
+def _rows(conn: Connection, after: int = 0, upto: int | None = None) -> Iterator[tuple[Any, ...]]:
+    """Stored rows in seq order, fetched in keyset pages so no huge result is held."""
+    statement = _PAGE if upto is None else _PAGE_UPTO
     while True:
-        rows = conn.execute(
-            query.where(events.c.seq > after).order_by(events.c.seq).limit(READ_CHUNK)
-        ).all()
+        rows = fastpath.fetch_all(conn, statement, {"after": after, "upto": upto,
+                                                    "chunk": READ_CHUNK})
         yield from rows
         if len(rows) < READ_CHUNK:
             return
-        after = rows[-1].seq
+        after = rows[-1][0]
 
 
 def read(conn: Connection, after_seq: int = 0, upto_seq: int | None = None) -> Iterator[LogRecord]:
-    query = select(events)
-    if upto_seq is not None:
-        query = query.where(events.c.seq <= upto_seq)
-    for row in _chunks(conn, query, after_seq):
+    for row in _rows(conn, after_seq, upto_seq):
         yield _to_record(row)
 
 
@@ -152,22 +155,21 @@ class ChainCheck:
     problem: str | None
 
 
-def check_chain(conn: Connection, rows: Iterable[Any] | None = None) -> ChainCheck:
+def check_chain(conn: Connection) -> ChainCheck:
     """Recompute every hash in seq order: edits, deletions, insertions and reorders show up."""
     prev_seq, prev_hash, count = 0, GENESIS_HASH, 0
-    for row in rows if rows is not None else _chunks(conn, select(events), 0):
+    for row in _rows(conn):
+        seq, event_id, kind, code, source, payload, occurred, recorded, version, digest = row
         count += 1
-        if row.seq != prev_seq + 1:
+        if seq != prev_seq + 1:
             return ChainCheck(count, prev_seq, prev_hash, prev_seq + 1,
                               f"record {prev_seq + 1} is missing (next stored record is "
-                              f"{row.seq}): records were deleted or renumbered")
-        expected = record_hash(
-            prev_hash, row.seq, row.event_id, row.kind, row.fault_code, row.source_id,
-            row.payload, row.occurred_at_ns, row.recorded_at_ns, row.schema_version,
-        )
-        if expected != row.hash:
-            return ChainCheck(count, prev_seq, prev_hash, row.seq,
-                              f"record {row.seq} does not match its hash: it was edited, "
+                              f"{seq}): records were deleted or renumbered")
+        expected = record_hash(prev_hash, seq, event_id, kind, code, source, payload, occurred,
+                               recorded, version)
+        if expected != digest:
+            return ChainCheck(count, prev_seq, prev_hash, seq,
+                              f"record {seq} does not match its hash: it was edited, "
                               "inserted or moved")
-        prev_seq, prev_hash = row.seq, row.hash
+        prev_seq, prev_hash = seq, digest
     return ChainCheck(count, prev_seq, prev_hash, None, None)

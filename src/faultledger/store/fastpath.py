@@ -80,3 +80,15 @@ def fetch_one(conn: Connection, statement: ClauseElement,
     finally:
         cursor.close()
     return None if row is None else tuple(row)
+
+
+def fetch_all(conn: Connection, statement: ClauseElement,
+              params: Mapping[str, Any] | None = None) -> list[tuple[Any, ...]]:
+    prepared = prepare(statement, conn.dialect)
+    cursor = _cursor(conn)
+    try:
+        cursor.execute(prepared.sql, prepared.params(params or {}))
+        rows: list[tuple[Any, ...]] = cursor.fetchall()
+    finally:
+        cursor.close()
+    return rows
