@@ -167,7 +167,7 @@ class Writer:
         self._idle = threading.Condition(self._mutex)
         self._leading = False
         self._gathering = False
-        self._last_batch = 1
+        self._callers = 0
         self._leader: int | None = None
         self._closed = False
         self._policy_checked: Policy | None = None
@@ -185,6 +185,7 @@ class Writer:
             if self._closed:
                 raise LedgerClosedError("the ledger is closed")
             self._queue.append(pending)
+            self._callers += 1
             if self._gathering:
                 self._arrived.notify()
             follow = self._leading
@@ -193,6 +194,8 @@ class Writer:
             pending.wake.acquire()  # answered, or handed the leadership
         if not pending.done:
             self._lead(pending)
+        with self._mutex:
+            self._callers -= 1
         if pending.error is not None:
             raise pending.error
         return pending.result
@@ -206,7 +209,6 @@ class Writer:
                     self._gather()
                     count = min(len(self._queue), self.max_batch)
                     batch = [self._queue.popleft() for _ in range(count)]
-                    self._last_batch = count
                 for group in _split_exclusive(batch):
                     self._commit(group)
                 for pending in batch:
@@ -222,13 +224,13 @@ class Writer:
                     self._idle.notify_all()
 
     def _gather(self) -> None:
-        """Wait up to GATHER_WAIT_S for as many commands as the last commit carried.
+        """Wait up to GATHER_WAIT_S until every caller inside ``submit`` has queued.
 
-        The callers answered by the previous commit usually come straight back with their
-        next report; waiting a fraction of an fsync for them lets them share the next one.
-        A lone reporter (last batch of one) never waits. Called with ``_turn`` held.
+        The callers answered by the previous commit are still inside ``submit`` or come
+        straight back with their next report; waiting a fraction of an fsync for them lets
+        them share the next one. A lone reporter never waits. Called with ``_mutex`` held.
         """
-        target = min(self._last_batch, self.max_batch)
+        target = min(self._callers, self.max_batch)
         if len(self._queue) >= target:
             return
         deadline = time.monotonic() + GATHER_WAIT_S
