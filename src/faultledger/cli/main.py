@@ -45,7 +45,7 @@ ConfigOption = Annotated[
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
 
 def fail(message: str, code: int = 2) -> NoReturn:
-    render.console(stderr=True).print(f"[bold red]error:[/] {message}", markup=True)
+    render.complain("error:", message)
     raise typer.Exit(code)
 
 
@@ -241,7 +241,7 @@ def verify(as_json: JsonOption = False, db: DbOption = None, config: ConfigOptio
                    f"replay; head seq {report_.head_seq} hash {report_.head_hash}")
     else:
         for problem in report_.problems:
-            render.console(stderr=True).print(f"[bold red]FAILED:[/] {problem}")
+            render.complain("FAILED:", problem)
         if report_.first_bad_seq is not None:
             typer.echo(f"first bad seq: {report_.first_bad_seq}")
     if not report_.ok:
@@ -293,14 +293,13 @@ def main() -> None:
     try:
         app()  # standalone: usage errors print help and exit 2 by themselves
     except FaultLedgerError as error:
-        render.console(stderr=True).print(f"[bold red]error:[/] {error}")
+        render.complain("error:", str(error))
         sys.exit(2)
     except Exception as error:
         if os.environ.get("FAULTLEDGER_DEBUG"):
             raise
-        render.console(stderr=True).print(
-            f"[bold red]internal error:[/] {type(error).__name__}: {error} "
-            "(set FAULTLEDGER_DEBUG=1 for a traceback)")
+        render.complain("internal error:", f"{type(error).__name__}: {error} "
+                        "(set FAULTLEDGER_DEBUG=1 for a traceback)")
         sys.exit(70)
 
 

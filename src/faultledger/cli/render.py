@@ -10,6 +10,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from faultledger.domain.clock import from_ns
@@ -144,6 +145,13 @@ def records_csv(records: Iterable[LogRecord]) -> str:
 
 def describe_url(url: str) -> str:
     return describe(url)
+
+
+def complain(label: str, message: str) -> None:
+    """One line on stderr: the label in red, the operator's text verbatim (never as markup,
+    never wrapped, so brackets survive and the line stays greppable)."""
+    Console(stderr=True, highlight=False, soft_wrap=True).print(
+        f"[bold red]{label}[/] {escape(message)}")
 
 
 def console(stderr: bool = False) -> Console:
