@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta, timezone
+from typing import Any
 
 import pytest
 
-from faultledger import Fault, FaultStatus, Policy
+from faultledger import ClearResult, Fault, FaultLedger, FaultStatus, Policy, ReportResult
+
+OpenLedger = Callable[..., FaultLedger]
 
 T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 CODE = "MOTOR_OVERHEAT"
@@ -22,7 +26,15 @@ def at(seconds: float) -> datetime:
     return T0 + timedelta(seconds=seconds)
 
 
-def failed(ledger, when, *, severity=1, source="/motor", description="", code=CODE):
+def failed(
+    ledger: FaultLedger,
+    when: datetime,
+    *,
+    severity: int = 1,
+    source: str = "/motor",
+    description: str = "",
+    code: str = CODE,
+) -> ReportResult:
     result = ledger.report(
         code, "FAILED", severity=severity, description=description, source_id=source, at=when
     )
@@ -30,7 +42,15 @@ def failed(ledger, when, *, severity=1, source="/motor", description="", code=CO
     return result
 
 
-def passed(ledger, when, *, severity=0, source="/motor", description="", code=CODE):
+def passed(
+    ledger: FaultLedger,
+    when: datetime,
+    *,
+    severity: int = 0,
+    source: str = "/motor",
+    description: str = "",
+    code: str = CODE,
+) -> ReportResult:
     result = ledger.report(
         code, "PASSED", severity=severity, description=description, source_id=source, at=when
     )
@@ -38,7 +58,7 @@ def passed(ledger, when, *, severity=0, source="/motor", description="", code=CO
     return result
 
 
-def clear(ledger, code=CODE):
+def clear(ledger: FaultLedger, code: str = CODE) -> ClearResult:
     result = ledger.clear(code, actor="test:operator", reason="")
     assert result.success, result.message
     return result
@@ -54,7 +74,7 @@ def fields_of(f: Fault) -> dict[str, object]:
     return {name: getattr(f, name) for name in FAULT_FIELDS}
 
 
-def fault(ledger, code=CODE) -> Fault:
+def fault(ledger: FaultLedger, code: str = CODE) -> Fault:
     found = ledger.get_fault(code)
     assert found is not None, f"{code} should exist"
     return found
@@ -62,7 +82,7 @@ def fault(ledger, code=CODE) -> Fault:
 
 # Steps of a script: F = FAILED (WARN), F! = FAILED (CRITICAL), P = PASSED, P! = PASSED with
 # severity CRITICAL, C = operator clear.
-def apply_step(ledger, step: str, when: datetime, *, source: str = "/motor") -> None:
+def apply_step(ledger: FaultLedger, step: str, when: datetime, *, source: str = "/motor") -> None:
     if step == "F":
         failed(ledger, when, severity=1, source=source)
     elif step == "F!":
@@ -77,9 +97,11 @@ def apply_step(ledger, step: str, when: datetime, *, source: str = "/motor") -> 
         raise AssertionError(f"unknown step {step!r}")
 
 
-def trajectory(ledger, steps: list[str], *, source: str = "/motor") -> list[tuple[str, int]]:
+def trajectory(
+    ledger: FaultLedger, steps: list[str], *, source: str = "/motor"
+) -> list[tuple[FaultStatus, int]]:
     """(status, debounce_counter) after each step."""
-    seen = []
+    seen: list[tuple[FaultStatus, int]] = []
     for i, step in enumerate(steps):
         apply_step(ledger, step, at(i), source=source)
         f = fault(ledger)
@@ -261,7 +283,12 @@ TRAJECTORIES = [
 
 
 @pytest.mark.parametrize(("policy", "steps", "expected"), TRAJECTORIES)
-def test_debounce_trajectory(open_ledger, policy, steps, expected) -> None:
+def test_debounce_trajectory(
+    open_ledger: OpenLedger,
+    policy: dict[str, Any],
+    steps: list[str],
+    expected: list[tuple[FaultStatus, int]],
+) -> None:
     ledger = open_ledger(Policy(**policy))
     assert trajectory(ledger, steps) == expected
 
@@ -273,9 +300,13 @@ def test_debounce_trajectory(open_ledger, policy, steps, expected) -> None:
         pytest.param(("FAILED", "PASSED"), [(PF, -1), (PF, 0)], id="names"),
     ],
 )
-def test_event_type_accepts_name_or_wire_value(open_ledger, event_types, expected) -> None:
+def test_event_type_accepts_name_or_wire_value(
+    open_ledger: OpenLedger,
+    event_types: tuple[str | int, ...],
+    expected: list[tuple[FaultStatus, int]],
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
-    seen = []
+    seen: list[tuple[FaultStatus, int]] = []
     for i, event_type in enumerate(event_types):
         r = ledger.report(CODE, event_type, severity=1, description="", source_id="/m", at=at(i))
         assert r.accepted, r.message
@@ -283,7 +314,7 @@ def test_event_type_accepts_name_or_wire_value(open_ledger, event_types, expecte
     assert seen == expected
 
 
-def test_passed_for_unknown_fault_is_accepted_and_stores_nothing(open_ledger) -> None:
+def test_passed_for_unknown_fault_is_accepted_and_stores_nothing(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     log_length = len(ledger.history())
 
@@ -294,13 +325,13 @@ def test_passed_for_unknown_fault_is_accepted_and_stores_nothing(open_ledger) ->
     assert len(ledger.history()) == log_length
 
 
-def test_passed_for_unknown_fault_has_no_seq(open_ledger) -> None:
+def test_passed_for_unknown_fault_has_no_seq(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     result = ledger.report(CODE, "PASSED", severity=0, description="", source_id="/m", at=T0)
     assert result.seq is None
 
 
-def test_first_failed_creates_fault(open_ledger) -> None:
+def test_first_failed_creates_fault(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     failed(ledger, T0, severity=2, source="/motor", description="winding hot")
 
@@ -319,7 +350,7 @@ def test_first_failed_creates_fault(open_ledger) -> None:
     ) == (CODE, PF, -1, 2, "winding hot", 1, T0, T0, None, ("/motor",))
 
 
-def test_passed_on_cleared_fault_changes_nothing(open_ledger) -> None:
+def test_passed_on_cleared_fault_changes_nothing(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1, healing_enabled=True))
     failed(ledger, at(0))
     clear(ledger)
@@ -338,7 +369,9 @@ def test_passed_on_cleared_fault_changes_nothing(open_ledger) -> None:
         pytest.param({"confirmation_threshold": -3}, 3, C, id="critical_is_confirmed"),
     ],
 )
-def test_reactivation_status_is_as_for_new_fault(open_ledger, policy, severity, status) -> None:
+def test_reactivation_status_is_as_for_new_fault(
+    open_ledger: OpenLedger, policy: dict[str, Any], severity: int, status: FaultStatus
+) -> None:
     ledger = open_ledger(Policy(**policy))
     for i in range(3):
         failed(ledger, at(i))
@@ -349,7 +382,7 @@ def test_reactivation_status_is_as_for_new_fault(open_ledger, policy, severity, 
     assert fault(ledger).status == status
 
 
-def test_reactivation_restarts_counter_at_minus_one(open_ledger) -> None:
+def test_reactivation_restarts_counter_at_minus_one(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     for i in range(5):
         failed(ledger, at(i))
@@ -378,7 +411,7 @@ def test_reactivation_restarts_counter_at_minus_one(open_ledger) -> None:
     ],
 )
 def test_override_prefix_matches_only_on_path_boundary(
-    open_ledger, source, status_after_one_failed
+    open_ledger: OpenLedger, source: str, status_after_one_failed: FaultStatus
 ) -> None:
     ledger = open_ledger(
         Policy(
@@ -390,7 +423,7 @@ def test_override_prefix_matches_only_on_path_boundary(
     assert fault(ledger).status == status_after_one_failed
 
 
-def test_override_lid_does_not_match_lidar(open_ledger) -> None:
+def test_override_lid_does_not_match_lidar(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(
         Policy(
             confirmation_threshold=-3,
@@ -425,7 +458,9 @@ NESTED_OVERRIDES = {
         pytest.param("/motor", 5, id="unrelated_uses_global"),
     ],
 )
-def test_longest_matching_override_prefix_wins(open_ledger, overrides, source, failed_needed):
+def test_longest_matching_override_prefix_wins(
+    open_ledger: OpenLedger, overrides: dict[str, dict[str, int]], source: str, failed_needed: int
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-5, overrides=overrides))
     for i in range(failed_needed - 1):
         failed(ledger, at(i), source=source)
@@ -436,7 +471,9 @@ def test_longest_matching_override_prefix_wins(open_ledger, overrides, source, f
     assert fault(ledger).status == C
 
 
-def test_override_inherits_unset_confirmation_and_healing_threshold(open_ledger) -> None:
+def test_override_inherits_unset_confirmation_and_healing_threshold(
+    open_ledger: OpenLedger,
+) -> None:
     # The override only enables healing; the band comes from the global policy (-2, 2).
     ledger = open_ledger(
         Policy(
@@ -451,7 +488,7 @@ def test_override_inherits_unset_confirmation_and_healing_threshold(open_ledger)
     ]
 
 
-def test_override_inherits_unset_healing_enabled(open_ledger) -> None:
+def test_override_inherits_unset_healing_enabled(open_ledger: OpenLedger) -> None:
     # The override only moves the confirmation threshold; healing (enabled, 1) is global.
     ledger = open_ledger(
         Policy(
@@ -466,7 +503,7 @@ def test_override_inherits_unset_healing_enabled(open_ledger) -> None:
     ]
 
 
-def test_sources_without_override_keep_global_policy(open_ledger) -> None:
+def test_sources_without_override_keep_global_policy(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(
         Policy(
             confirmation_threshold=-2,
@@ -480,7 +517,9 @@ def test_sources_without_override_keep_global_policy(open_ledger) -> None:
     ]
 
 
-def test_stored_counter_clamped_to_reporting_sources_band_before_step(open_ledger) -> None:
+def test_stored_counter_clamped_to_reporting_sources_band_before_step(
+    open_ledger: OpenLedger,
+) -> None:
     ledger = open_ledger(
         Policy(confirmation_threshold=-5, overrides={"/fast": {"confirmation_threshold": -2}})
     )
@@ -494,7 +533,7 @@ def test_stored_counter_clamped_to_reporting_sources_band_before_step(open_ledge
     assert (fault(ledger).status, fault(ledger).debounce_counter) == (C, -1)
 
 
-def test_failed_step_result_clamped_to_reporting_sources_band(open_ledger) -> None:
+def test_failed_step_result_clamped_to_reporting_sources_band(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(
         Policy(confirmation_threshold=-5, overrides={"/fast": {"confirmation_threshold": -2}})
     )
@@ -521,21 +560,23 @@ def test_failed_step_result_clamped_to_reporting_sources_band(open_ledger) -> No
         pytest.param([2, 3, 1], 3, id="critical_kept"),
     ],
 )
-def test_severity_is_max_of_failed_severities(open_ledger, severities, expected) -> None:
+def test_severity_is_max_of_failed_severities(
+    open_ledger: OpenLedger, severities: list[int], expected: int
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-5))
     for i, severity in enumerate(severities):
         failed(ledger, at(i), severity=severity)
     assert fault(ledger).severity == expected
 
 
-def test_passed_severity_does_not_raise_severity(open_ledger) -> None:
+def test_passed_severity_does_not_raise_severity(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-5))
     failed(ledger, at(0), severity=1)
     passed(ledger, at(1), severity=3)
     assert fault(ledger).severity == 1
 
 
-def test_severity_not_lowered_across_reactivation(open_ledger) -> None:
+def test_severity_not_lowered_across_reactivation(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     failed(ledger, at(0), severity=2)
     clear(ledger)
@@ -554,7 +595,7 @@ def test_severity_not_lowered_across_reactivation(open_ledger) -> None:
     ],
 )
 def test_description_replaced_by_failed_with_non_empty_description(
-    open_ledger, descriptions, expected
+    open_ledger: OpenLedger, descriptions: list[str], expected: str
 ) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-5))
     for i, description in enumerate(descriptions):
@@ -562,28 +603,30 @@ def test_description_replaced_by_failed_with_non_empty_description(
     assert fault(ledger).description == expected
 
 
-def test_passed_description_is_ignored(open_ledger) -> None:
+def test_passed_description_is_ignored(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-5))
     failed(ledger, at(0), description="first")
     passed(ledger, at(1), description="all good again")
     assert fault(ledger).description == "first"
 
 
-def test_reporting_sources_is_sorted_set_of_failed_sources(open_ledger) -> None:
+def test_reporting_sources_is_sorted_set_of_failed_sources(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-5))
     for i, source in enumerate(["/b", "/c", "/a", "/b"]):
         failed(ledger, at(i), source=source)
     assert fault(ledger).reporting_sources == ("/a", "/b", "/c")
 
 
-def test_passed_source_not_added_to_reporting_sources(open_ledger) -> None:
+def test_passed_source_not_added_to_reporting_sources(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-5))
     failed(ledger, at(0), source="/b")
     passed(ledger, at(1), source="/a")
     assert fault(ledger).reporting_sources == ("/b",)
 
 
-def test_reporting_sources_never_pruned_across_clear_and_reactivation(open_ledger) -> None:
+def test_reporting_sources_never_pruned_across_clear_and_reactivation(
+    open_ledger: OpenLedger,
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     failed(ledger, at(0), source="/b")
     failed(ledger, at(1), source="/a")
@@ -592,7 +635,9 @@ def test_reporting_sources_never_pruned_across_clear_and_reactivation(open_ledge
     assert fault(ledger).reporting_sources == ("/a", "/b", "/c")
 
 
-def test_occurrence_count_is_one_on_creation_and_not_raised_by_repeated_failed(open_ledger):
+def test_occurrence_count_is_one_on_creation_and_not_raised_by_repeated_failed(
+    open_ledger: OpenLedger,
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     for i in range(5):
         failed(ledger, at(i))
@@ -608,14 +653,16 @@ def test_occurrence_count_is_one_on_creation_and_not_raised_by_repeated_failed(o
         pytest.param(["F", "C", "P", "F"], 2, id="passed_on_cleared_does_not_count"),
     ],
 )
-def test_occurrence_count_incremented_by_reactivation_from_cleared(open_ledger, steps, expected):
+def test_occurrence_count_incremented_by_reactivation_from_cleared(
+    open_ledger: OpenLedger, steps: list[str], expected: int
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     for i, step in enumerate(steps):
         apply_step(ledger, step, at(i))
     assert fault(ledger).occurrence_count == expected
 
 
-def test_occurrence_count_not_raised_by_heal_and_reconfirm(open_ledger) -> None:
+def test_occurrence_count_not_raised_by_heal_and_reconfirm(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(
         Policy(confirmation_threshold=-1, healing_enabled=True, healing_threshold=1)
     )
@@ -624,7 +671,7 @@ def test_occurrence_count_not_raised_by_heal_and_reconfirm(open_ledger) -> None:
     assert fault(ledger).occurrence_count == 1
 
 
-def test_first_occurred_is_creation_time(open_ledger) -> None:
+def test_first_occurred_is_creation_time(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     failed(ledger, at(0))
     failed(ledger, at(5))
@@ -632,7 +679,7 @@ def test_first_occurred_is_creation_time(open_ledger) -> None:
     assert fault(ledger).first_occurred == at(0)
 
 
-def test_first_and_last_occurred_set_to_reactivation_time(open_ledger) -> None:
+def test_first_and_last_occurred_set_to_reactivation_time(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     failed(ledger, at(0))
     failed(ledger, at(5))
@@ -643,7 +690,7 @@ def test_first_and_last_occurred_set_to_reactivation_time(open_ledger) -> None:
     assert (fault(ledger).first_occurred, fault(ledger).last_occurred) == (at(60), at(60))
 
 
-def test_last_occurred_moves_with_every_failed(open_ledger) -> None:
+def test_last_occurred_moves_with_every_failed(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     failed(ledger, at(0))
     failed(ledger, at(7))
@@ -651,21 +698,21 @@ def test_last_occurred_moves_with_every_failed(open_ledger) -> None:
     assert fault(ledger).last_occurred == at(9)
 
 
-def test_last_occurred_not_moved_by_passed(open_ledger) -> None:
+def test_last_occurred_not_moved_by_passed(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     failed(ledger, at(0))
     passed(ledger, at(5))
     assert fault(ledger).last_occurred == at(0)
 
 
-def test_last_passed_is_none_until_first_passed(open_ledger) -> None:
+def test_last_passed_is_none_until_first_passed(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     failed(ledger, at(0))
     failed(ledger, at(1))
     assert fault(ledger).last_passed is None
 
 
-def test_last_passed_moves_with_every_passed_on_active_fault(open_ledger) -> None:
+def test_last_passed_moves_with_every_passed_on_active_fault(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     failed(ledger, at(0))
     passed(ledger, at(3))
@@ -673,7 +720,7 @@ def test_last_passed_moves_with_every_passed_on_active_fault(open_ledger) -> Non
     assert fault(ledger).last_passed == at(8)
 
 
-def test_last_passed_not_moved_by_passed_on_cleared_fault(open_ledger) -> None:
+def test_last_passed_not_moved_by_passed_on_cleared_fault(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     failed(ledger, at(0))
     passed(ledger, at(3))
@@ -682,7 +729,7 @@ def test_last_passed_not_moved_by_passed_on_cleared_fault(open_ledger) -> None:
     assert fault(ledger).last_passed == at(3)
 
 
-def test_times_are_returned_as_utc(open_ledger) -> None:
+def test_times_are_returned_as_utc(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     plus_two = timezone(timedelta(hours=2))
     reported_at = datetime(2026, 11, 22, 1, 30, tzinfo=plus_two)  # 23:30 UTC
@@ -691,11 +738,12 @@ def test_times_are_returned_as_utc(open_ledger) -> None:
 
     f = fault(ledger)
     for moment in (f.first_occurred, f.last_occurred, f.last_passed):
+        assert moment is not None
         assert moment.utcoffset() == timedelta(0)
     assert f.first_occurred == datetime(2026, 11, 21, 23, 30, tzinfo=UTC)
 
 
-def test_sub_second_report_time_is_kept(open_ledger) -> None:
+def test_sub_second_report_time_is_kept(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     moment = T0 + timedelta(microseconds=123_456)
     failed(ledger, moment)

@@ -153,7 +153,7 @@ def test_eight_threads_reporting_are_all_acknowledged_in_a_gap_free_log(tmp_path
     assert all(r.accepted and r.seq is not None for r in answers), [
         r.message for r in answers if not r.accepted][:3]
     assert [r.seq for r in history] == list(range(1, last + 1))
-    by_seq = {r.seq: r.event_id for r in history}
+    by_seq: dict[int | None, str] = {r.seq: r.event_id for r in history}
     assert all(by_seq[r.seq] == r.event_id for r in answers)
     assert len({r.seq for r in answers}) == len(answers)
     # besides the reports only the policy record (before the first report)

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
+from typing import Any
 
 import pytest
 
-from faultledger import Fault, FaultStatus, Policy
+from faultledger import Fault, FaultLedger, FaultStatus, Notification, Policy
+
+OpenLedger = Callable[..., FaultLedger]
+Subscribe = Callable[[FaultLedger], list[Notification]]
 
 T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 CODE = "MOTOR_OVERHEAT"
@@ -29,11 +34,17 @@ def fields_of(f: Fault) -> dict[str, object]:
     return {name: getattr(f, name) for name in FAULT_FIELDS}
 
 
+def fault(ledger: FaultLedger, code: str = CODE) -> Fault:
+    found = ledger.get_fault(code)
+    assert found is not None, f"{code} should exist"
+    return found
+
+
 # Steps: F = FAILED (WARN), F! = FAILED (CRITICAL), P = PASSED, C = operator clear.
-def apply_step(ledger, step: str, when: datetime, *, code: str = CODE) -> None:
+def apply_step(ledger: FaultLedger, step: str, when: datetime, *, code: str = CODE) -> None:
     if step == "C":
-        result = ledger.clear(code, actor="test:operator", reason="")
-        assert result.success, result.message
+        cleared = ledger.clear(code, actor="test:operator", reason="")
+        assert cleared.success, cleared.message
         return
     event_type, severity = {"F": ("FAILED", 1), "F!": ("FAILED", 3), "P": ("PASSED", 0)}[step]
     result = ledger.report(
@@ -42,9 +53,11 @@ def apply_step(ledger, step: str, when: datetime, *, code: str = CODE) -> None:
     assert result.accepted, result.message
 
 
-def events_per_step(ledger, received, steps: list[str]) -> list[list[str]]:
+def events_per_step(
+    ledger: FaultLedger, received: list[Notification], steps: list[str]
+) -> list[list[str]]:
     """The event types announced by each step, in order."""
-    per_step = []
+    per_step: list[list[str]] = []
     for i, step in enumerate(steps):
         already = len(received)
         apply_step(ledger, step, at(i))
@@ -111,13 +124,21 @@ EVENT_TABLE = [
 
 
 @pytest.mark.parametrize(("policy", "steps", "expected"), EVENT_TABLE)
-def test_event_types_announced(open_ledger, notifications, policy, steps, expected) -> None:
+def test_event_types_announced(
+    open_ledger: OpenLedger,
+    notifications: Subscribe,
+    policy: dict[str, Any],
+    steps: list[str],
+    expected: list[list[str]],
+) -> None:
     ledger = open_ledger(Policy(**policy))
     received = notifications(ledger)
     assert events_per_step(ledger, received, steps) == expected
 
 
-def test_confirmed_event_carries_fault_state_after_the_change(open_ledger, notifications):
+def test_confirmed_event_carries_fault_state_after_the_change(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     received = notifications(ledger)
     ledger.report(CODE, "FAILED", severity=1, description="hot", source_id="/b", at=at(0))
@@ -140,7 +161,9 @@ def test_confirmed_event_carries_fault_state_after_the_change(open_ledger, notif
     }
 
 
-def test_updated_event_carries_fault_state_after_passed(open_ledger, notifications) -> None:
+def test_updated_event_carries_fault_state_after_passed(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     ledger.report(CODE, "FAILED", severity=2, description="", source_id="/motor", at=at(0))
     received = notifications(ledger)
@@ -152,7 +175,9 @@ def test_updated_event_carries_fault_state_after_passed(open_ledger, notificatio
             event.fault.last_passed) == (UPDATED, FaultStatus.CONFIRMED, 0, at(5))
 
 
-def test_move_into_healed_announces_fault_cleared_with_status_healed(open_ledger, notifications):
+def test_move_into_healed_announces_fault_cleared_with_status_healed(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(
         Policy(confirmation_threshold=-1, healing_enabled=True, healing_threshold=1)
     )
@@ -174,7 +199,7 @@ def test_move_into_healed_announces_fault_cleared_with_status_healed(open_ledger
     ],
 )
 def test_clear_announces_fault_cleared_with_status_cleared(
-    open_ledger, notifications, steps_before_clear
+    open_ledger: OpenLedger, notifications: Subscribe, steps_before_clear: list[str]
 ) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     for i, step in enumerate(steps_before_clear):
@@ -189,7 +214,9 @@ def test_clear_announces_fault_cleared_with_status_cleared(
     )
 
 
-def test_event_fault_equals_stored_fault_after_each_step(open_ledger, notifications) -> None:
+def test_event_fault_equals_stored_fault_after_each_step(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(
         Policy(confirmation_threshold=-2, healing_enabled=True, healing_threshold=1)
     )
@@ -199,13 +226,15 @@ def test_event_fault_equals_stored_fault_after_each_step(open_ledger, notificati
         already = len(received)
         apply_step(ledger, step, at(i))
         for event in received[already:]:
-            assert fields_of(event.fault) == fields_of(ledger.get_fault(CODE)), (i, step)
+            assert fields_of(event.fault) == fields_of(fault(ledger)), (i, step)
     assert [n.event_type for n in received] == [
         CONFIRMED, UPDATED, UPDATED, UPDATED, CLEARED, CONFIRMED, CLEARED, CONFIRMED
     ]
 
 
-def test_event_names_the_fault_it_is_about(open_ledger, notifications) -> None:
+def test_event_names_the_fault_it_is_about(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     received = notifications(ledger)
     apply_step(ledger, "F", at(0), code="FAN_STALL")
@@ -213,7 +242,9 @@ def test_event_names_the_fault_it_is_about(open_ledger, notifications) -> None:
     assert [n.fault.fault_code for n in received] == ["FAN_STALL", "MOTOR_OVERHEAT"]
 
 
-def test_event_timestamp_is_timezone_aware(open_ledger, notifications) -> None:
+def test_event_timestamp_is_timezone_aware(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     received = notifications(ledger)
     apply_step(ledger, "F", at(0))
@@ -222,7 +253,9 @@ def test_event_timestamp_is_timezone_aware(open_ledger, notifications) -> None:
     assert event.timestamp.utcoffset() is not None
 
 
-def test_every_subscriber_receives_the_event(open_ledger, notifications) -> None:
+def test_every_subscriber_receives_the_event(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
     first = notifications(ledger)
     second = notifications(ledger)
@@ -232,9 +265,9 @@ def test_every_subscriber_receives_the_event(open_ledger, notifications) -> None
     )
 
 
-def test_cancelled_subscription_receives_nothing(open_ledger) -> None:
+def test_cancelled_subscription_receives_nothing(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-1))
-    received = []
+    received: list[Notification] = []
     subscription = ledger.subscribe(received.append)
     apply_step(ledger, "F", at(0))
     subscription.cancel()
@@ -245,7 +278,9 @@ def test_cancelled_subscription_receives_nothing(open_ledger) -> None:
     assert [n.event_type for n in received] == [CONFIRMED]
 
 
-def test_reopened_ledger_announces_only_new_changes(open_ledger, notifications) -> None:
+def test_reopened_ledger_announces_only_new_changes(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     policy = Policy(confirmation_threshold=-1)
     first = open_ledger(policy)
     apply_step(first, "F", at(0))
@@ -260,7 +295,7 @@ def test_reopened_ledger_announces_only_new_changes(open_ledger, notifications) 
 
 
 def test_a_subscriber_that_reports_synchronously_is_refused_not_deadlocked(
-    open_ledger,
+    open_ledger: OpenLedger,
 ) -> None:
     ledger = open_ledger(Policy())
     answers: list[tuple[bool, str]] = []

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from datetime import UTC, datetime, timedelta
 
 import pytest
 
-from faultledger import Fault, FaultStatus, Policy
+from faultledger import Fault, FaultLedger, FaultStatus, Policy
+
+OpenLedger = Callable[..., FaultLedger]
 
 T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 
@@ -35,7 +38,14 @@ class Clock:
         return T0 + timedelta(seconds=self.ticks)
 
 
-def report(ledger, clock, code, event_type, severity=0, source="/motor") -> None:
+def report(
+    ledger: FaultLedger,
+    clock: Clock,
+    code: str,
+    event_type: str,
+    severity: int = 0,
+    source: str = "/motor",
+) -> None:
     result = ledger.report(
         code, event_type, severity=severity, description="", source_id=source, at=clock()
     )
@@ -46,8 +56,14 @@ def codes(faults: list[Fault]) -> list[str]:
     return sorted(f.fault_code for f in faults)
 
 
+def fault(ledger: FaultLedger, code: str) -> Fault:
+    found = ledger.get_fault(code)
+    assert found is not None, f"{code} should exist"
+    return found
+
+
 @pytest.fixture
-def ledger(open_ledger):
+def ledger(open_ledger: OpenLedger) -> FaultLedger:
     """One fault in every status (confirmation at -3, healing at +3)."""
     ledger = open_ledger(
         Policy(confirmation_threshold=-3, healing_enabled=True, healing_threshold=3)
@@ -70,9 +86,9 @@ def ledger(open_ledger):
     return ledger
 
 
-def test_population_has_one_fault_per_status(ledger) -> None:
+def test_population_has_one_fault_per_status(ledger: FaultLedger) -> None:
     # guards the fixture the other tests rely on
-    found = {code: ledger.get_fault(code) for code in POPULATION}
+    found = {code: fault(ledger, code) for code in POPULATION}
     assert {code: (f.status, f.severity) for code, f in found.items()} == POPULATION
 
 
@@ -97,11 +113,13 @@ def test_population_has_one_fault_per_status(ledger) -> None:
         pytest.param([FaultStatus.HEALED], ["HEALED_ERROR"], id="enum_member_accepted"),
     ],
 )
-def test_list_faults_status_filter(ledger, statuses, expected) -> None:
+def test_list_faults_status_filter(
+    ledger: FaultLedger, statuses: Sequence[str], expected: list[str]
+) -> None:
     assert codes(ledger.list_faults(statuses=statuses)) == expected
 
 
-def test_list_faults_default_is_confirmed_only(ledger) -> None:
+def test_list_faults_default_is_confirmed_only(ledger: FaultLedger) -> None:
     assert codes(ledger.list_faults()) == CONFIRMED_ONLY
 
 
@@ -117,24 +135,28 @@ def test_list_faults_default_is_confirmed_only(ledger) -> None:
         pytest.param(ALL_STATUSES, None, sorted(POPULATION), id="none_means_any_severity"),
     ],
 )
-def test_list_faults_severity_filter_is_exact(ledger, statuses, severity, expected) -> None:
+def test_list_faults_severity_filter_is_exact(
+    ledger: FaultLedger, statuses: Sequence[str], severity: int | None, expected: list[str]
+) -> None:
     assert codes(ledger.list_faults(statuses=statuses, severity=severity)) == expected
 
 
-def test_list_faults_returns_fault_values(ledger) -> None:
+def test_list_faults_returns_fault_values(ledger: FaultLedger) -> None:
     faults = ledger.list_faults()
     assert all(isinstance(f, Fault) for f in faults)
     assert {f.status for f in faults} == {FaultStatus.CONFIRMED}
 
 
 @pytest.mark.parametrize(("code", "status_and_severity"), list(POPULATION.items()))
-def test_get_fault_returns_fault_in_any_status(ledger, code, status_and_severity) -> None:
+def test_get_fault_returns_fault_in_any_status(
+    ledger: FaultLedger, code: str, status_and_severity: tuple[FaultStatus, int]
+) -> None:
     found = ledger.get_fault(code)
     assert isinstance(found, Fault)
     assert (found.fault_code, (found.status, found.severity)) == (code, status_and_severity)
 
 
-def test_get_fault_unknown_is_none(ledger) -> None:
+def test_get_fault_unknown_is_none(ledger: FaultLedger) -> None:
     assert ledger.get_fault("NEVER_REPORTED") is None
 
 
@@ -144,7 +166,7 @@ def test_get_fault_unknown_is_none(ledger) -> None:
 
 
 @pytest.fixture
-def entity_ledger(open_ledger):
+def entity_ledger(open_ledger: OpenLedger) -> FaultLedger:
     """Faults reported from various sources; confirmation at -2 so single reports stay PREFAILED."""
     ledger = open_ledger(Policy(confirmation_threshold=-2))
     clock = Clock()
@@ -181,11 +203,13 @@ def entity_ledger(open_ledger):
         pytest.param("camera", [], id="unknown_entity_has_no_faults"),
     ],
 )
-def test_list_faults_for_entity(entity_ledger, entity, expected) -> None:
+def test_list_faults_for_entity(
+    entity_ledger: FaultLedger, entity: str, expected: list[str]
+) -> None:
     assert codes(entity_ledger.list_faults_for_entity(entity)) == expected
 
 
-def test_list_faults_for_entity_includes_every_status(entity_ledger) -> None:
+def test_list_faults_for_entity_includes_every_status(entity_ledger: FaultLedger) -> None:
     statuses = {f.fault_code: f.status for f in entity_ledger.list_faults_for_entity("lidar")}
     assert statuses == {
         "LIDAR_BARE": FaultStatus.PREFAILED,
@@ -195,6 +219,6 @@ def test_list_faults_for_entity_includes_every_status(entity_ledger) -> None:
     }
 
 
-def test_passed_source_does_not_link_fault_to_entity(entity_ledger) -> None:
+def test_passed_source_does_not_link_fault_to_entity(entity_ledger: FaultLedger) -> None:
     matched = codes(entity_ledger.list_faults_for_entity("/robot/sensors/lidar"))
     assert "MOTOR_OVERHEAT" not in matched

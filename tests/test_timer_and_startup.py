@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
+from typing import Any
 
 import pytest
 
-from faultledger import Fault, FaultStatus, Policy
+from faultledger import Fault, FaultLedger, FaultStatus, LogRecord, Notification, Policy
+
+OpenLedger = Callable[..., FaultLedger]
+Subscribe = Callable[[FaultLedger], list[Notification]]
 
 # Report times lie in the future on purpose: a ledger that also checks timers against the wall
 # clock can then never confirm these faults on its own, so only run_timers(now=...) decides.
@@ -29,24 +34,34 @@ def fields_of(f: Fault) -> dict[str, object]:
     return {name: getattr(f, name) for name in FAULT_FIELDS}
 
 
-def failed(ledger, when, *, code=CODE, severity=1, source="/motor", description=""):
+def failed(
+    ledger: FaultLedger,
+    when: datetime,
+    *,
+    code: str = CODE,
+    severity: int = 1,
+    source: str = "/motor",
+    description: str = "",
+) -> None:
     result = ledger.report(
         code, "FAILED", severity=severity, description=description, source_id=source, at=when
     )
     assert result.accepted, result.message
 
 
-def passed(ledger, when, *, code=CODE, source="/motor"):
+def passed(
+    ledger: FaultLedger, when: datetime, *, code: str = CODE, source: str = "/motor"
+) -> None:
     result = ledger.report(code, "PASSED", severity=0, description="", source_id=source, at=when)
     assert result.accepted, result.message
 
 
-def clear(ledger, code=CODE):
+def clear(ledger: FaultLedger, code: str = CODE) -> None:
     result = ledger.clear(code, actor="test:operator", reason="")
     assert result.success, result.message
 
 
-def apply_step(ledger, step: str, when: datetime) -> None:
+def apply_step(ledger: FaultLedger, step: str, when: datetime) -> None:
     """F = FAILED, P = PASSED, C = operator clear."""
     if step == "F":
         failed(ledger, when)
@@ -58,13 +73,17 @@ def apply_step(ledger, step: str, when: datetime) -> None:
         raise AssertionError(f"unknown step {step!r}")
 
 
-def status(ledger, code=CODE) -> FaultStatus:
+def fault(ledger: FaultLedger, code: str = CODE) -> Fault:
     found = ledger.get_fault(code)
     assert found is not None, f"{code} should exist"
-    return found.status
+    return found
 
 
-def records(ledger, kind: str) -> list:
+def status(ledger: FaultLedger, code: str = CODE) -> FaultStatus:
+    return fault(ledger, code).status
+
+
+def records(ledger: FaultLedger, kind: str) -> list[LogRecord]:
     return [r for r in ledger.history() if r.kind == kind]
 
 
@@ -73,7 +92,7 @@ def records(ledger, kind: str) -> list:
 # --------------------------------------------------------------------------------------------
 
 
-def test_timer_does_not_confirm_before_delay(open_ledger) -> None:
+def test_timer_does_not_confirm_before_delay(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(**AUTO_CONFIRM_10S))
     failed(ledger, at(0))
 
@@ -81,7 +100,7 @@ def test_timer_does_not_confirm_before_delay(open_ledger) -> None:
     assert status(ledger) == FaultStatus.PREFAILED
 
 
-def test_timer_confirms_prefailed_fault_once_delay_has_passed(open_ledger) -> None:
+def test_timer_confirms_prefailed_fault_once_delay_has_passed(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(**AUTO_CONFIRM_10S))
     failed(ledger, at(0))
 
@@ -89,7 +108,9 @@ def test_timer_confirms_prefailed_fault_once_delay_has_passed(open_ledger) -> No
     assert status(ledger) == FaultStatus.CONFIRMED
 
 
-def test_timer_confirmation_is_announced_as_fault_confirmed(open_ledger, notifications) -> None:
+def test_timer_confirmation_is_announced_as_fault_confirmed(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(Policy(**AUTO_CONFIRM_10S))
     received = notifications(ledger)
     failed(ledger, at(0))
@@ -101,7 +122,7 @@ def test_timer_confirmation_is_announced_as_fault_confirmed(open_ledger, notific
     ]
 
 
-def test_timer_confirmation_is_logged_once(open_ledger) -> None:
+def test_timer_confirmation_is_logged_once(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(**AUTO_CONFIRM_10S))
     failed(ledger, at(0))
 
@@ -110,7 +131,9 @@ def test_timer_confirmation_is_logged_once(open_ledger) -> None:
     assert [r.fault_code for r in records(ledger, "fault_confirmed_by_timer")] == [CODE]
 
 
-def test_later_timer_run_confirms_nothing_more(open_ledger, notifications) -> None:
+def test_later_timer_run_confirms_nothing_more(
+    open_ledger: OpenLedger, notifications: Subscribe
+) -> None:
     ledger = open_ledger(Policy(**AUTO_CONFIRM_10S))
     failed(ledger, at(0))
     ledger.run_timers(now=at(10))
@@ -121,7 +144,7 @@ def test_later_timer_run_confirms_nothing_more(open_ledger, notifications) -> No
     assert (len(ledger.history()), received) == (log_length, [])
 
 
-def test_timer_measures_from_the_last_failed(open_ledger) -> None:
+def test_timer_measures_from_the_last_failed(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(**AUTO_CONFIRM_10S))
     failed(ledger, at(0))
     failed(ledger, at(5))
@@ -131,7 +154,7 @@ def test_timer_measures_from_the_last_failed(open_ledger) -> None:
     assert ledger.run_timers(now=at(15)) == 1
 
 
-def test_passed_does_not_restart_the_timer(open_ledger) -> None:
+def test_passed_does_not_restart_the_timer(open_ledger: OpenLedger) -> None:
     # FAILED then PASSED leaves the counter at 0 and the fault PREFAILED; the last FAILED is at 0.
     ledger = open_ledger(Policy(**AUTO_CONFIRM_10S))
     failed(ledger, at(0))
@@ -155,7 +178,11 @@ def test_passed_does_not_restart_the_timer(open_ledger) -> None:
     ],
 )
 def test_timer_leaves_faults_that_are_not_prefailed_alone(
-    open_ledger, notifications, policy, steps, expected_status
+    open_ledger: OpenLedger,
+    notifications: Subscribe,
+    policy: dict[str, Any],
+    steps: list[str],
+    expected_status: FaultStatus,
 ) -> None:
     ledger = open_ledger(Policy(**policy))
     for i, step in enumerate(steps):
@@ -169,7 +196,7 @@ def test_timer_leaves_faults_that_are_not_prefailed_alone(
     )
 
 
-def test_timer_is_off_when_auto_confirm_is_zero(open_ledger) -> None:
+def test_timer_is_off_when_auto_confirm_is_zero(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3, auto_confirm_after_sec=0.0))
     failed(ledger, at(0))
 
@@ -177,7 +204,7 @@ def test_timer_is_off_when_auto_confirm_is_zero(open_ledger) -> None:
     assert status(ledger) == FaultStatus.PREFAILED
 
 
-def test_timer_returns_number_of_faults_it_confirmed(open_ledger) -> None:
+def test_timer_returns_number_of_faults_it_confirmed(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(**AUTO_CONFIRM_10S))
     failed(ledger, at(0), code="FAN_STALL")
     failed(ledger, at(1), code="MOTOR_OVERHEAT")
@@ -190,7 +217,7 @@ def test_timer_returns_number_of_faults_it_confirmed(open_ledger) -> None:
     assert ledger.run_timers(now=at(15)) == 1
 
 
-def test_timer_confirmation_survives_restart(open_ledger) -> None:
+def test_timer_confirmation_survives_restart(open_ledger: OpenLedger) -> None:
     policy = Policy(**AUTO_CONFIRM_10S)
     first = open_ledger(policy)
     failed(first, at(0))
@@ -214,7 +241,7 @@ ALL_CODES = ["PREFAILED_ONE", "PREPASSED_ONE", "CONFIRMED_ONE", "HEALED_ONE", "C
 NOT_HEALED_CODES = [code for code in ALL_CODES if code != "HEALED_ONE"]
 
 
-def build_one_fault_per_status(ledger) -> None:
+def build_one_fault_per_status(ledger: FaultLedger) -> None:
     """With HEALING: one fault each PREFAILED, PREPASSED, CONFIRMED, HEALED, CLEARED."""
     failed(ledger, at(0), code="PREFAILED_ONE", description="flaky", source="/a")
 
@@ -242,11 +269,11 @@ def build_one_fault_per_status(ledger) -> None:
     ]
 
 
-def snapshot(ledger, codes) -> dict[str, dict[str, object]]:
-    return {code: fields_of(ledger.get_fault(code)) for code in codes}
+def snapshot(ledger: FaultLedger, codes: list[str]) -> dict[str, dict[str, object]]:
+    return {code: fields_of(fault(ledger, code)) for code in codes}
 
 
-def heal_motor_then_close(open_ledger) -> None:
+def heal_motor_then_close(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(**HEALING))
     failed(ledger, at(0))
     failed(ledger, at(1))
@@ -256,7 +283,7 @@ def heal_motor_then_close(open_ledger) -> None:
     ledger.close()
 
 
-def test_startup_without_healing_clears_healed_fault(open_ledger) -> None:
+def test_startup_without_healing_clears_healed_fault(open_ledger: OpenLedger) -> None:
     heal_motor_then_close(open_ledger)
 
     reopened = open_ledger(Policy(**NO_HEALING))
@@ -264,7 +291,7 @@ def test_startup_without_healing_clears_healed_fault(open_ledger) -> None:
     assert status(reopened) == FaultStatus.CLEARED
 
 
-def test_startup_reclassification_is_logged(open_ledger) -> None:
+def test_startup_reclassification_is_logged(open_ledger: OpenLedger) -> None:
     heal_motor_then_close(open_ledger)
 
     reopened = open_ledger(Policy(**NO_HEALING))
@@ -272,7 +299,7 @@ def test_startup_reclassification_is_logged(open_ledger) -> None:
     assert [r.fault_code for r in records(reopened, "reclassified_on_startup")] == [CODE]
 
 
-def test_startup_with_healing_leaves_healed_fault_alone(open_ledger) -> None:
+def test_startup_with_healing_leaves_healed_fault_alone(open_ledger: OpenLedger) -> None:
     heal_motor_then_close(open_ledger)
 
     reopened = open_ledger(Policy(**HEALING))
@@ -281,7 +308,7 @@ def test_startup_with_healing_leaves_healed_fault_alone(open_ledger) -> None:
     assert records(reopened, "reclassified_on_startup") == []
 
 
-def test_startup_without_healing_touches_only_healed_faults(open_ledger) -> None:
+def test_startup_without_healing_touches_only_healed_faults(open_ledger: OpenLedger) -> None:
     first = open_ledger(Policy(**HEALING))
     build_one_fault_per_status(first)
     before = snapshot(first, NOT_HEALED_CODES)
@@ -293,7 +320,7 @@ def test_startup_without_healing_touches_only_healed_faults(open_ledger) -> None
     assert [r.fault_code for r in records(reopened, "reclassified_on_startup")] == ["HEALED_ONE"]
 
 
-def test_startup_reclassification_happens_once(open_ledger) -> None:
+def test_startup_reclassification_happens_once(open_ledger: OpenLedger) -> None:
     heal_motor_then_close(open_ledger)
     second = open_ledger(Policy(**NO_HEALING))
     second.close()
@@ -303,19 +330,19 @@ def test_startup_reclassification_happens_once(open_ledger) -> None:
     assert len(records(third, "reclassified_on_startup")) == 1
 
 
-def test_fault_cleared_on_startup_reactivates_on_failed(open_ledger) -> None:
+def test_fault_cleared_on_startup_reactivates_on_failed(open_ledger: OpenLedger) -> None:
     heal_motor_then_close(open_ledger)
     reopened = open_ledger(Policy(**NO_HEALING))
 
     failed(reopened, at(100))
 
-    reactivated = reopened.get_fault(CODE)
+    reactivated = fault(reopened)
     assert (reactivated.status, reactivated.occurrence_count, reactivated.first_occurred) == (
         FaultStatus.PREFAILED, 2, at(100)
     )
 
 
-def test_reopen_with_policy_none_keeps_state_exactly(open_ledger) -> None:
+def test_reopen_with_policy_none_keeps_state_exactly(open_ledger: OpenLedger) -> None:
     first = open_ledger(Policy(**HEALING))
     build_one_fault_per_status(first)
     before = snapshot(first, NOT_HEALED_CODES)
@@ -326,7 +353,7 @@ def test_reopen_with_policy_none_keeps_state_exactly(open_ledger) -> None:
     assert snapshot(reopened, NOT_HEALED_CODES) == before
 
 
-def test_reopen_with_policy_none_keeps_healed_fault(open_ledger) -> None:
+def test_reopen_with_policy_none_keeps_healed_fault(open_ledger: OpenLedger) -> None:
     # policy=None means "no new configuration": the recorded policy (healing on) stays effective.
     first = open_ledger(Policy(**HEALING))
     build_one_fault_per_status(first)
@@ -339,7 +366,7 @@ def test_reopen_with_policy_none_keeps_healed_fault(open_ledger) -> None:
     assert records(reopened, "reclassified_on_startup") == []
 
 
-def test_reopen_with_same_policy_keeps_state_exactly(open_ledger) -> None:
+def test_reopen_with_same_policy_keeps_state_exactly(open_ledger: OpenLedger) -> None:
     first = open_ledger(Policy(**HEALING))
     build_one_fault_per_status(first)
     before = snapshot(first, ALL_CODES)
@@ -350,14 +377,14 @@ def test_reopen_with_same_policy_keeps_state_exactly(open_ledger) -> None:
     assert snapshot(reopened, ALL_CODES) == before
 
 
-def test_debounce_counter_survives_restart(open_ledger) -> None:
+def test_debounce_counter_survives_restart(open_ledger: OpenLedger) -> None:
     first = open_ledger(Policy(confirmation_threshold=-3))
     failed(first, at(0))
     failed(first, at(1))
     first.close()
 
     reopened = open_ledger(Policy(confirmation_threshold=-3))
-    assert (status(reopened), reopened.get_fault(CODE).debounce_counter) == (
+    assert (status(reopened), fault(reopened).debounce_counter) == (
         FaultStatus.PREFAILED, -2
     )
     failed(reopened, at(2))
@@ -365,7 +392,9 @@ def test_debounce_counter_survives_restart(open_ledger) -> None:
     assert status(reopened) == FaultStatus.CONFIRMED
 
 
-def test_narrower_band_after_restart_clamps_stored_counter_before_next_step(open_ledger):
+def test_narrower_band_after_restart_clamps_stored_counter_before_next_step(
+    open_ledger: OpenLedger,
+) -> None:
     first = open_ledger(Policy(confirmation_threshold=-5))
     for i in range(5):
         failed(first, at(i))
@@ -375,7 +404,7 @@ def test_narrower_band_after_restart_clamps_stored_counter_before_next_step(open
     passed(reopened, at(10))
 
     # -5 clamped into [-2, 3] is -2, then +1
-    assert (status(reopened), reopened.get_fault(CODE).debounce_counter) == (
+    assert (status(reopened), fault(reopened).debounce_counter) == (
         FaultStatus.CONFIRMED, -1
     )
 
@@ -390,7 +419,9 @@ def test_narrower_band_after_restart_clamps_stored_counter_before_next_step(open
                      id="changed_threshold_recorded"),
     ],
 )
-def test_policy_change_recorded_on_reopen(open_ledger, reopen_policy, new_records) -> None:
+def test_policy_change_recorded_on_reopen(
+    open_ledger: OpenLedger, reopen_policy: Policy | None, new_records: int
+) -> None:
     first = open_ledger(Policy(**HEALING))
     failed(first, at(0))
     recorded = len(records(first, "policy_changed"))

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta, timezone
+from typing import Any
 
 import pytest
 
-from faultledger import Fault, FaultStatus, Policy
+from faultledger import Fault, FaultLedger, FaultStatus, Notification, Policy, ReportResult
+
+OpenLedger = Callable[..., FaultLedger]
+Subscribe = Callable[[FaultLedger], list[Notification]]
 
 T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 CODE = "MOTOR_OVERHEAT"
@@ -21,6 +26,12 @@ FAULT_FIELDS = (
 
 def fields_of(f: Fault) -> dict[str, object]:
     return {name: getattr(f, name) for name in FAULT_FIELDS}
+
+
+def fault(ledger: FaultLedger, code: str = CODE) -> Fault:
+    found = ledger.get_fault(code)
+    assert found is not None, f"{code} should exist"
+    return found
 
 
 def invalid_character(char: str) -> str:
@@ -82,15 +93,15 @@ INVALID_REPORTS = [
 ]
 
 
-def report(ledger, **changes):
-    arguments = {**VALID_REPORT, **changes}
+def report(ledger: FaultLedger, **changes: Any) -> ReportResult:
+    arguments: dict[str, Any] = {**VALID_REPORT, **changes}
     code = arguments.pop("fault_code")
     event_type = arguments.pop("event_type")
     return ledger.report(code, event_type, **arguments)
 
 
 @pytest.fixture
-def ledger(open_ledger):
+def ledger(open_ledger: OpenLedger) -> FaultLedger:
     """A ledger holding one PREFAILED fault CODE, so an accepted report would change it."""
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     first = ledger.report(CODE, "FAILED", severity=1, description="hot", source_id="/motor", at=T0)
@@ -105,13 +116,17 @@ def ledger(open_ledger):
 
 @pytest.mark.parametrize("event_type", ["FAILED", "PASSED"])
 @pytest.mark.parametrize(("code", "message"), INVALID_CODES)
-def test_invalid_fault_code_rejected_with_spec_message(ledger, code, message, event_type):
+def test_invalid_fault_code_rejected_with_spec_message(
+    ledger: FaultLedger, code: str, message: str, event_type: str
+) -> None:
     result = report(ledger, fault_code=code, event_type=event_type)
     assert (result.accepted, result.message) == (False, message)
 
 
 @pytest.mark.parametrize(("changes", "word"), INVALID_FIELDS)
-def test_invalid_report_field_rejected_with_clear_message(ledger, changes, word) -> None:
+def test_invalid_report_field_rejected_with_clear_message(
+    ledger: FaultLedger, changes: dict[str, Any], word: str | None
+) -> None:
     result = report(ledger, **changes)
     assert result.accepted is False
     assert result.message.strip() != ""
@@ -120,27 +135,29 @@ def test_invalid_report_field_rejected_with_clear_message(ledger, changes, word)
 
 
 @pytest.mark.parametrize("changes", INVALID_REPORTS)
-def test_rejected_report_stores_nothing(ledger, changes) -> None:
+def test_rejected_report_stores_nothing(ledger: FaultLedger, changes: dict[str, Any]) -> None:
     log_length = len(ledger.history())
-    before = fields_of(ledger.get_fault(CODE))
+    before = fields_of(fault(ledger))
 
     result = report(ledger, **changes)
 
     assert result.accepted is False
     assert result.seq is None
     assert len(ledger.history()) == log_length
-    assert fields_of(ledger.get_fault(CODE)) == before
+    assert fields_of(fault(ledger)) == before
 
 
 @pytest.mark.parametrize("changes", INVALID_REPORTS)
-def test_rejected_report_creates_no_fault(ledger, changes) -> None:
+def test_rejected_report_creates_no_fault(ledger: FaultLedger, changes: dict[str, Any]) -> None:
     report(ledger, **changes)
     everything = ledger.list_faults(statuses=[s.value for s in FaultStatus])
     assert [f.fault_code for f in everything] == [CODE]
 
 
 @pytest.mark.parametrize("changes", INVALID_REPORTS)
-def test_rejected_report_emits_no_notification(ledger, notifications, changes) -> None:
+def test_rejected_report_emits_no_notification(
+    ledger: FaultLedger, notifications: Subscribe, changes: dict[str, Any]
+) -> None:
     received = notifications(ledger)
     # made CONFIRMED first, so an accepted FAILED or PASSED would announce fault_updated
     report(ledger, severity=3)
@@ -177,12 +194,12 @@ def test_rejected_report_emits_no_notification(ledger, notifications, changes) -
         ),
     ],
 )
-def test_valid_report_accepted(ledger, changes) -> None:
+def test_valid_report_accepted(ledger: FaultLedger, changes: dict[str, Any]) -> None:
     result = report(ledger, **changes)
     assert result.accepted is True, result.message
 
 
-def test_accepted_report_is_stored_under_its_seq(ledger) -> None:
+def test_accepted_report_is_stored_under_its_seq(ledger: FaultLedger) -> None:
     log_length = len(ledger.history())
 
     result = report(ledger)
@@ -194,7 +211,7 @@ def test_accepted_report_is_stored_under_its_seq(ledger) -> None:
 
 
 @pytest.mark.parametrize("severity", [4, -1, 99])
-def test_severity_not_checked_on_passed(ledger, severity) -> None:
+def test_severity_not_checked_on_passed(ledger: FaultLedger, severity: int) -> None:
     result = report(ledger, event_type="PASSED", severity=severity)
     assert result.accepted is True, result.message
 
@@ -205,30 +222,35 @@ def test_severity_not_checked_on_passed(ledger, severity) -> None:
 
 
 @pytest.mark.parametrize(("code", "message"), INVALID_CODES)
-def test_get_fault_rejects_invalid_code_with_spec_message(ledger, code, message) -> None:
+def test_get_fault_rejects_invalid_code_with_spec_message(
+    ledger: FaultLedger, code: str, message: str
+) -> None:
     with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
         ledger.get_fault(code)
 
 
 @pytest.mark.parametrize(("code", "message"), INVALID_CODES)
-def test_lookup_fault_rejects_invalid_code_with_spec_message(ledger, code, message) -> None:
+def test_lookup_fault_rejects_invalid_code_with_spec_message(
+    ledger: FaultLedger, code: str, message: str
+) -> None:
     result = ledger.lookup_fault(code)
     assert (result.success, result.message, result.fault) == (False, message, None)
 
 
-def test_get_fault_unknown_returns_none(ledger) -> None:
+def test_get_fault_unknown_returns_none(ledger: FaultLedger) -> None:
     assert ledger.get_fault(UNKNOWN) is None
 
 
-def test_lookup_fault_unknown_says_not_found(ledger) -> None:
+def test_lookup_fault_unknown_says_not_found(ledger: FaultLedger) -> None:
     result = ledger.lookup_fault(UNKNOWN)
     assert (result.success, result.message, result.fault) == (
         False, f"Fault not found: {UNKNOWN}", None
     )
 
 
-def test_lookup_fault_known_succeeds_with_empty_message(ledger) -> None:
+def test_lookup_fault_known_succeeds_with_empty_message(ledger: FaultLedger) -> None:
     result = ledger.lookup_fault(CODE)
+    assert result.fault is not None
     assert (result.success, result.message, result.fault.fault_code) == (True, "", CODE)
 
 
@@ -238,7 +260,9 @@ def test_lookup_fault_known_succeeds_with_empty_message(ledger) -> None:
 
 
 @pytest.mark.parametrize(("code", "message"), INVALID_CODES)
-def test_clear_rejects_invalid_code_with_spec_message(ledger, code, message) -> None:
+def test_clear_rejects_invalid_code_with_spec_message(
+    ledger: FaultLedger, code: str, message: str
+) -> None:
     result = ledger.clear(code, actor="cli:alice", reason="")
     assert (result.success, result.message) == (False, message)
 
@@ -248,14 +272,14 @@ def test_clear_rejects_invalid_code_with_spec_message(ledger, code, message) -> 
         *(p.id for p in INVALID_CODES), "unknown_code"
     ]
 )
-def test_failed_clear_stores_nothing(ledger, code) -> None:
+def test_failed_clear_stores_nothing(ledger: FaultLedger, code: str) -> None:
     log_length = len(ledger.history())
-    before = fields_of(ledger.get_fault(CODE))
+    before = fields_of(fault(ledger))
 
     ledger.clear(code, actor="cli:alice", reason="")
 
     assert len(ledger.history()) == log_length
-    assert fields_of(ledger.get_fault(CODE)) == before
+    assert fields_of(fault(ledger)) == before
 
 
 @pytest.mark.parametrize(
@@ -263,30 +287,32 @@ def test_failed_clear_stores_nothing(ledger, code) -> None:
         *(p.id for p in INVALID_CODES), "unknown_code"
     ]
 )
-def test_failed_clear_emits_no_notification(ledger, notifications, code) -> None:
+def test_failed_clear_emits_no_notification(
+    ledger: FaultLedger, notifications: Subscribe, code: str
+) -> None:
     received = notifications(ledger)
     ledger.clear(code, actor="cli:alice", reason="")
     assert received == []
 
 
-def test_clear_unknown_fault_says_not_found(ledger) -> None:
+def test_clear_unknown_fault_says_not_found(ledger: FaultLedger) -> None:
     result = ledger.clear(UNKNOWN, actor="cli:alice", reason="")
     assert (result.success, result.message) == (False, f"Fault not found: {UNKNOWN}")
 
 
-def test_clear_known_fault_says_cleared(ledger) -> None:
+def test_clear_known_fault_says_cleared(ledger: FaultLedger) -> None:
     result = ledger.clear(CODE, actor="cli:alice", reason="")
     assert (result.success, result.message) == (True, f"Fault cleared: {CODE}")
-    assert ledger.get_fault(CODE).status == FaultStatus.CLEARED
+    assert fault(ledger).status == FaultStatus.CLEARED
 
 
-def test_clear_of_already_cleared_fault_succeeds(ledger) -> None:
+def test_clear_of_already_cleared_fault_succeeds(ledger: FaultLedger) -> None:
     ledger.clear(CODE, actor="cli:alice", reason="")
     result = ledger.clear(CODE, actor="cli:bob", reason="again")
     assert (result.success, result.message) == (True, f"Fault cleared: {CODE}")
 
 
-def test_clear_is_logged_with_actor_and_reason(ledger) -> None:
+def test_clear_is_logged_with_actor_and_reason(ledger: FaultLedger) -> None:
     ledger.clear(CODE, actor="cli:alice", reason="replaced the fan")
 
     [record] = [r for r in ledger.history() if r.kind == "fault_cleared"]
