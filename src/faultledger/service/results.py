@@ -31,6 +31,13 @@ class FaultLookup:
 
 
 @dataclass(frozen=True, slots=True)
+class EntityLookup:
+    success: bool
+    message: str
+    faults: list[Fault] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
 class VerifyReport:
     """Outcome of ``verify``: chain intact, head anchored, projections equal a full replay."""
 

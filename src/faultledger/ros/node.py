@@ -1,0 +1,149 @@
+"""The `fault_manager` node: ROS services and the events topic over one FaultLedger.
+
+Callbacks only translate: request → FaultLedger call → response. Report callbacks run in a
+reentrant group on a multi-threaded executor, so concurrent clients share group commits.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from faultledger_msgs.srv import GetHistory
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from ros2_medkit_msgs.msg import FaultEvent
+from ros2_medkit_msgs.srv import (
+    ClearFault,
+    GetFault,
+    ListFaults,
+    ListFaultsForEntity,
+    ReportFault,
+)
+
+from faultledger.domain.clock import from_ns
+from faultledger.domain.notifications import Notification
+from faultledger.domain.policy import Policy
+from faultledger.errors import FaultLedgerError
+from faultledger.ros import convert
+from faultledger.service.ledger import FaultLedger
+
+log = logging.getLogger(__name__)
+
+NODE_NAME = "fault_manager"
+SERVICE_QUEUE_DEPTH = 10_000
+"""Requests a service keeps queued: above any burst we test (4 clients x 500), so a fault
+storm is answered instead of silently dropped (the default depth is 10)."""
+HISTORY_LIMIT = 10_000
+"""Most records one get_history answer carries; page with since/until."""
+
+SERVICE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=SERVICE_QUEUE_DEPTH,
+                         reliability=ReliabilityPolicy.RELIABLE)
+EVENTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
+
+
+def declare_policy(node: Node, policy: Policy) -> Policy:
+    """medkit's parameter names override the config file's global policy values."""
+    node.declare_parameter("confirmation_threshold", policy.confirmation_threshold)
+    node.declare_parameter("healing_enabled", policy.healing_enabled)
+    node.declare_parameter("healing_threshold", policy.healing_threshold)
+    node.declare_parameter("auto_confirm_after_sec", float(policy.auto_confirm_after_sec))
+    value = {name: node.get_parameter(name).value for name in (
+        "confirmation_threshold", "healing_enabled", "healing_threshold",
+        "auto_confirm_after_sec")}
+    return Policy.model_validate({**policy.model_dump(), **value})
+
+
+class FaultManagerNode:
+    """Services and publisher of `/fault_manager`, bound to an open ledger."""
+
+    def __init__(self, node: Node, ledger: FaultLedger) -> None:
+        self.node = node
+        self.ledger = ledger
+        group = ReentrantCallbackGroup()
+        self.events = node.create_publisher(FaultEvent, "~/events", EVENTS_QOS)
+        services: list[tuple[Any, str, Any]] = [
+            (ReportFault, "~/report_fault", self.report_fault),
+            (ListFaults, "~/list_faults", self.list_faults),
+            (GetFault, "~/get_fault", self.get_fault),
+            (ClearFault, "~/clear_fault", self.clear_fault),
+            (ListFaultsForEntity, "~/list_faults_for_entity", self.list_faults_for_entity),
+            (GetHistory, "~/get_history", self.get_history),
+        ]
+        self.services = [
+            node.create_service(kind, name, callback, qos_profile=SERVICE_QOS,
+                                callback_group=group)
+            for kind, name, callback in services
+        ]
+        self.subscription = ledger.subscribe(self.publish)
+
+    def publish(self, notification: Notification) -> None:
+        """Called by the ledger after the change is durable, in log order."""
+        self.events.publish(convert.event_msg(notification))
+
+    def report_fault(self, request: Any, response: Any) -> Any:
+        result = self.ledger.report(request.fault_code, request.event_type, request.severity,
+                                    request.description, request.source_id)
+        if not result.accepted:
+            self.node.get_logger().warning(
+                f"report of {request.fault_code!r} from {request.source_id!r} rejected: "
+                f"{result.message}")
+        response.accepted = result.accepted
+        return response
+
+    def list_faults(self, request: Any, response: Any) -> Any:
+        severity = request.severity if request.filter_by_severity else None
+        response.faults = [convert.fault_msg(f)
+                           for f in self.ledger.list_faults(request.statuses, severity)]
+        response.muted_count = 0
+        response.cluster_count = 0
+        return response
+
+    def get_fault(self, request: Any, response: Any) -> Any:
+        lookup = self.ledger.lookup_fault(request.fault_code)
+        response.success = lookup.success
+        response.error_message = lookup.message
+        if lookup.fault is not None:
+            response.fault = convert.fault_msg(lookup.fault)
+            records = response.environment_data.extended_data_records
+            records.first_occurrence_ns = lookup.fault.first_occurred_ns
+            records.last_occurrence_ns = lookup.fault.last_occurred_ns
+        return response
+
+    def clear_fault(self, request: Any, response: Any) -> Any:
+        result = self.ledger.clear(request.fault_code, actor="ros:clear_fault")
+        response.success = result.success
+        response.message = result.message
+        response.auto_cleared_codes = []
+        return response
+
+    def list_faults_for_entity(self, request: Any, response: Any) -> Any:
+        lookup = self.ledger.lookup_entity(request.entity_id)
+        response.success = lookup.success
+        response.error_message = lookup.message
+        response.faults = [convert.fault_msg(f) for f in lookup.faults]
+        return response
+
+    def get_history(self, request: Any, response: Any) -> Any:
+        since, until = convert.from_time(request.since), convert.from_time(request.until)
+        limit = min(request.limit or HISTORY_LIMIT, HISTORY_LIMIT)
+        try:
+            records = self.ledger.history(
+                code=request.fault_code or None, source=request.source_id or None,
+                since=from_ns(since) if since else None, until=from_ns(until) if until else None,
+                kinds=list(request.kinds), limit=limit)
+        except FaultLedgerError as error:
+            response.success = False
+            response.error_message = str(error)
+            return response
+        response.success = True
+        response.records = [convert.record_msg(r) for r in records]
+        return response
+
+    def close(self) -> None:
+        self.subscription.cancel()
+        for service in self.services:
+            self.node.destroy_service(service)

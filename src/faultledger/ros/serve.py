@@ -1,0 +1,63 @@
+"""`faultledger serve`: run the fault manager node until SIGINT/SIGTERM."""
+
+from __future__ import annotations
+
+import signal
+import threading
+from types import FrameType
+
+import rclpy
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import ok, try_shutdown
+
+from faultledger.ros.node import NODE_NAME, FaultManagerNode, declare_policy
+from faultledger.service.config import Settings
+from faultledger.service.ledger import FaultLedger
+from faultledger.store.database import describe
+
+EXECUTOR_THREADS = 8
+"""Concurrent service callbacks: reports from many clients share group commits."""
+
+
+def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
+    """Serve until a signal; the database URL is --db, else ``database_path``, else config."""
+    rclpy.init(args=["faultledger", *ros_args],
+               signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+
+    def on_signal(_signum: int, _frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    node = Node(NODE_NAME)
+    ledger: FaultLedger | None = None
+    manager: FaultManagerNode | None = None
+    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+    try:
+        node.declare_parameter("database_path", "")
+        policy = declare_policy(node, settings.policy)
+        path = str(node.get_parameter("database_path").value or "")
+        url = db_url or (f"sqlite:///{path}" if path else settings.database.url)
+        ledger = FaultLedger.open(url, policy=policy, max_batch=settings.database.max_batch)
+        manager = FaultManagerNode(node, ledger)
+        executor.add_node(node)
+        restored = ledger.restored
+        print(f"fault_manager ready: db={describe(url)} faults={restored.faults} "
+              f"events={restored.events} replayed={restored.replayed}", flush=True)
+        node.get_logger().info(
+            f"serving {node.get_fully_qualified_name()} on {describe(url)}: restored "
+            f"{restored.faults} faults from {restored.events} events")
+        while not stop.is_set() and ok():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        if manager is not None:
+            manager.close()
+        executor.shutdown()
+        if ledger is not None:
+            ledger.close()
+        node.destroy_node()
+        try_shutdown()
+    return 0
