@@ -23,8 +23,8 @@ venv: $(STAMP)
 interfaces: $(ROS_STAMP)
 	$(BIN)/python interfaces/build.py
 
-run: $(STAMP)
-	$(BIN)/faultledger demo
+run: interfaces
+	scripts/run-demo
 
 test: lint interfaces typecheck unit ros-tests
 
