@@ -8,6 +8,7 @@ import time
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.utilities import try_shutdown
 from ros2_medkit_msgs.srv import ListFaults
 
 from faultledger.domain.types import Severity
@@ -60,7 +61,7 @@ def main() -> int:
     finally:
         reporter.destroy()
         node.destroy_node()
-        rclpy.try_shutdown()
+        try_shutdown()
 
 
 if __name__ == "__main__":

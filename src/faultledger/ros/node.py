@@ -22,7 +22,6 @@ from ros2_medkit_msgs.srv import (
     ReportFault,
 )
 
-from faultledger.domain.clock import from_ns
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
 from faultledger.errors import FaultLedgerError
@@ -133,7 +132,7 @@ class FaultManagerNode:
         try:
             records = self.ledger.history(
                 code=request.fault_code or None, source=request.source_id or None,
-                since=from_ns(since) if since else None, until=from_ns(until) if until else None,
+                since=since or None, until=until or None,
                 kinds=list(request.kinds), limit=limit)
         except FaultLedgerError as error:
             response.success = False

@@ -231,14 +231,17 @@ class FaultLedger:
             return EntityLookup(False, problem)
         return EntityLookup(True, "", self.list_faults_for_entity(entity_id))
 
-    def history(self, code: str | None = None, since: datetime | None = None,
-                until: datetime | None = None, source: str | None = None,
+    def history(self, code: str | None = None, since: datetime | int | None = None,
+                until: datetime | int | None = None, source: str | None = None,
                 kinds: Iterable[str] = (), limit: int | None = None) -> list[LogRecord]:
-        """Log records in seq order; ``since``/``until`` bound ``occurred_at`` as [since, until)."""
+        """Log records in seq order; ``since``/``until`` bound ``occurred_at`` as [since, until).
+
+        A bound may be an int of nanoseconds since the epoch: a datetime holds only
+        microseconds, and ROS stamps carry nanoseconds.
+        """
         where = event_log.RecordFilter(
             fault_code=code, source_id=source,
-            since_ns=None if since is None else to_ns(since),
-            until_ns=None if until is None else to_ns(until),
+            since_ns=_instant_ns(since), until_ns=_instant_ns(until),
             kinds=tuple(kinds), limit=limit,
         )
         with self._db.reading() as conn:
@@ -399,3 +402,7 @@ def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -
         problems.append(f"checkpoint names record {checkpoint.policy_seq} as the policy in force, "
                         f"a replay finds {expected.policy_seq}")
     return problems
+
+
+def _instant_ns(moment: datetime | int | None) -> int | None:
+    return moment if moment is None or isinstance(moment, int) else to_ns(moment)
