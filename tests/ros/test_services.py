@@ -12,10 +12,12 @@ import json
 import re
 import signal
 import time
+import uuid
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+from faultledger_msgs.srv import ReportFaultOnce
 from ros2_medkit_msgs.msg import Fault as FaultMsg
 from ros2_medkit_msgs.srv import (
     ClearFault,
@@ -82,6 +84,7 @@ class TestOneSharedManager:
             f"{NS}/clear_fault": "ros2_medkit_msgs/srv/ClearFault",
             f"{NS}/list_faults_for_entity": "ros2_medkit_msgs/srv/ListFaultsForEntity",
             f"{NS}/get_history": "faultledger_msgs/srv/GetHistory",
+            f"{NS}/report_fault_once": "faultledger_msgs/srv/ReportFaultOnce",
         }
 
         def graph_complete() -> bool:
@@ -281,6 +284,29 @@ class TestOneSharedManager:
         assert list(response.faults) == []
 
     # -- get_history -------------------------------------------------------------------------------
+    def test_report_fault_once_stores_a_retried_event_id_once(self, served: RosClient) -> None:
+        def once(event_id: str, description: str) -> Any:
+            request = ReportFaultOnce.Request(
+                event_id=event_id, fault_code="ONCE_ESTOP", event_type=FAILED, severity=2,
+                description=description, source_id="/once/estop")
+            return served.call(ReportFaultOnce, f"{NS}/report_fault_once", request)
+
+        key, other = str(uuid.uuid4()), str(uuid.uuid4())
+        answers = [once(key, "press"), once(key, "press (retry)"), once(other, "2nd")]
+        assert [(a.accepted, a.duplicate, a.message) for a in answers] == [
+            (True, False, ""), (True, True, ""), (True, False, "")]
+        records = served.history(fault_code="ONCE_ESTOP").records
+        assert [(r.event_id, json.loads(r.payload_json)["description"]) for r in records] == [
+            (key, "press"), (other, "2nd")]
+        fault = served.get("ONCE_ESTOP").fault
+        assert fault.description == "2nd"  # the retry's description was not applied either
+        assert stamp_ns(fault.last_occurred) == stamp_ns(records[1].occurred_at)
+
+        bad = once("not-a-uuid", "x")
+        assert (bad.accepted, bad.duplicate) == (False, False)
+        assert bad.message == "event_id must be a UUID, got 'not-a-uuid'"
+        assert len(served.history(fault_code="ONCE_ESTOP").records) == 2
+
     def test_get_history_filters_and_record_data(self, served: RosClient) -> None:
         assert served.report("H_ALPHA", FAILED, 2, "first", "/hist/one")
         time.sleep(0.01)

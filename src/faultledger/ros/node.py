@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from faultledger_msgs.srv import GetHistory
+from faultledger_msgs.srv import GetHistory, ReportFaultOnce
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -27,6 +27,7 @@ from faultledger.domain.policy import Policy
 from faultledger.errors import FaultLedgerError
 from faultledger.ros import convert
 from faultledger.service.ledger import FaultLedger
+from faultledger.service.results import ReportResult
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +67,7 @@ class FaultManagerNode:
         self.events = node.create_publisher(FaultEvent, "~/events", EVENTS_QOS)
         services: list[tuple[Any, str, Any]] = [
             (ReportFault, "~/report_fault", self.report_fault),
+            (ReportFaultOnce, "~/report_fault_once", self.report_fault_once),
             (ListFaults, "~/list_faults", self.list_faults),
             (GetFault, "~/get_fault", self.get_fault),
             (ClearFault, "~/clear_fault", self.clear_fault),
@@ -84,14 +86,24 @@ class FaultManagerNode:
         self.events.publish(convert.event_msg(notification))
 
     def report_fault(self, request: Any, response: Any) -> Any:
+        response.accepted = self._report(request, event_id=None).accepted
+        return response
+
+    def report_fault_once(self, request: Any, response: Any) -> Any:
+        result = self._report(request, event_id=request.event_id)
+        response.accepted = result.accepted
+        response.duplicate = result.duplicate
+        response.message = "" if result.accepted else result.message
+        return response
+
+    def _report(self, request: Any, event_id: str | None) -> ReportResult:
         result = self.ledger.report(request.fault_code, request.event_type, request.severity,
-                                    request.description, request.source_id)
+                                    request.description, request.source_id, event_id=event_id)
         if not result.accepted:
             self.node.get_logger().warning(
                 f"report of {request.fault_code!r} from {request.source_id!r} rejected: "
                 f"{result.message}")
-        response.accepted = result.accepted
-        return response
+        return result
 
     def list_faults(self, request: Any, response: Any) -> Any:
         severity = request.severity if request.filter_by_severity else None

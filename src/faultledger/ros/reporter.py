@@ -3,7 +3,12 @@
 Like ros2_medkit's reporter it filters locally and never blocks the caller (``call_async``).
 Unlike medkit, which drops reports while the manager is down, it keeps a bounded queue: a
 report made before the manager is up, or sent to a manager that died before answering, is
-(re)sent once the service is ready. Delivery is therefore at-least-once: a manager that
+(re)sent once the service is ready.
+
+Retries must not double count (one e-stop press is one FAILED). Each report gets a UUID that
+every retry reuses, sent through faultledger's ``report_fault_once`` service, which stores an
+event_id once: delivery is exactly-once. Against a plain medkit manager (no such service) the
+reporter falls back to ``report_fault`` and delivery becomes at-least-once: a manager that
 answers later than ``response_timeout_sec`` may see a report twice.
 """
 
@@ -11,9 +16,11 @@ from __future__ import annotations
 
 import threading
 import time
+import uuid
 from collections import deque
-from typing import Any
+from typing import NamedTuple
 
+from faultledger_msgs.srv import ReportFaultOnce
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
@@ -27,11 +34,21 @@ MIN_QOS_DEPTH = 1000
 """The client's request/response queue depth: the default 10 silently drops bursts."""
 
 
+class _Report(NamedTuple):
+    """One report waiting for the manager's answer; event_id stays the same across retries."""
+
+    fault_code: str
+    event_type: int
+    severity: int
+    description: str
+    event_id: str
+
+
 class FaultReporter:
     """Reports FAILED/PASSED events for one source to the fault manager's ReportFault service."""
 
     def __init__(self, node: Node, source_id: str, *,
-                 service_name: str = "/fault_manager/report_fault", queue_size: int = 1000,
+                 manager: str = "/fault_manager", queue_size: int = 1000,
                  response_timeout_sec: float = 5.0, flush_period_sec: float = 0.25) -> None:
         self._log = node.get_logger()
         if not source_id:
@@ -44,16 +61,18 @@ class FaultReporter:
         self._timeout = response_timeout_sec
         self._filter = LocalFilter(self._read_parameters(node))
         self._lock = threading.Lock()  # report() may run on any thread, the timer on the executor
-        self._queue: deque[Any] = deque()  # ReportFault.Request, oldest first
-        self._in_flight: list[tuple[Future, Any, float]] = []  # (future, request, deadline)
+        self._queue: deque[_Report] = deque()  # oldest first
+        self._in_flight: list[tuple[Future, _Report, float]] = []  # (future, report, deadline)
         self._dropped = 0
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(queue_size, MIN_QOS_DEPTH),
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
         group = MutuallyExclusiveCallbackGroup()  # not starved by the user's own callbacks
         self._node = node
-        self._client = node.create_client(ReportFault, service_name, qos_profile=qos,
-                                          callback_group=group)
+        self._once = node.create_client(ReportFaultOnce, f"{manager}/report_fault_once",
+                                        qos_profile=qos, callback_group=group)
+        self._plain = node.create_client(ReportFault, f"{manager}/report_fault",
+                                         qos_profile=qos, callback_group=group)
         self._timer = node.create_timer(flush_period_sec, self._on_timer, callback_group=group)
 
     def report(self, fault_code: str, severity: int, description: str = "") -> bool:
@@ -66,9 +85,8 @@ class FaultReporter:
         with self._lock:
             if not self._filter.should_forward(fault_code, severity):
                 return False
-            self._enqueue(ReportFault.Request(
-                fault_code=fault_code, event_type=ReportFault.Request.EVENT_FAILED,
-                severity=severity, description=description, source_id=self._source_id))
+            self._enqueue(_Report(fault_code, ReportFault.Request.EVENT_FAILED, severity,
+                                  description, str(uuid.uuid4())))
         return True
 
     def report_passed(self, fault_code: str) -> bool:
@@ -78,9 +96,8 @@ class FaultReporter:
         with self._lock:
             if not self._filter.should_forward_passed(fault_code):
                 return False
-            self._enqueue(ReportFault.Request(
-                fault_code=fault_code, event_type=ReportFault.Request.EVENT_PASSED,
-                severity=0, description="", source_id=self._source_id))
+            self._enqueue(_Report(fault_code, ReportFault.Request.EVENT_PASSED, 0, "",
+                                  str(uuid.uuid4())))
         return True
 
     @property
@@ -92,7 +109,8 @@ class FaultReporter:
     def destroy(self) -> None:
         """Stop retrying and release the timer and client; unsent reports are lost."""
         self._node.destroy_timer(self._timer)
-        self._node.destroy_client(self._client)
+        self._node.destroy_client(self._once)
+        self._node.destroy_client(self._plain)
 
     def _usable(self, fault_code: str) -> bool:
         if not fault_code:
@@ -114,7 +132,7 @@ class FaultReporter:
             self._log.warning(f"FaultReporter: {problem}")
         return config
 
-    def _enqueue(self, request: Any) -> None:
+    def _enqueue(self, request: _Report) -> None:
         """Append (lock held), dropping the oldest when full; send what the manager can take."""
         if len(self._queue) >= self._queue_size:
             self._drop_oldest()
@@ -130,29 +148,41 @@ class FaultReporter:
 
     def _send_queued(self) -> None:
         # Lock held, so requests leave in the order they were made (FAILED before PASSED matters).
-        if not self._queue or not self._client.service_is_ready():
+        if not self._queue:
             return
+        client, kind = self._once, ReportFaultOnce.Request
+        if not client.service_is_ready():
+            client, kind = self._plain, ReportFault.Request  # a medkit manager: at-least-once
+            if not client.service_is_ready():
+                return
         deadline = time.monotonic() + self._timeout
         while self._queue:
-            request = self._queue.popleft()
-            self._in_flight.append((self._client.call_async(request), request, deadline))
+            report = self._queue.popleft()
+            request = kind(fault_code=report.fault_code, event_type=report.event_type,
+                           severity=report.severity, description=report.description,
+                           source_id=self._source_id)
+            if kind is ReportFaultOnce.Request:
+                request.event_id = report.event_id
+            self._in_flight.append((client.call_async(request), report, deadline))
 
     def _on_timer(self) -> None:
         """Retire answered requests, re-queue unanswered ones, send if the manager is up."""
         with self._lock:
             now = time.monotonic()
             waiting, lost = [], []
-            for future, request, deadline in self._in_flight:
+            for future, report, deadline in self._in_flight:
                 if future.done():
                     response = future.result()
                     if response is not None and not response.accepted:
+                        reason = getattr(response, "message", "") or "no reason given"
                         self._log.warning(f"FaultReporter: manager rejected "
-                                          f"'{request.fault_code}'")
+                                          f"'{report.fault_code}': {reason}")
                 elif now >= deadline:
-                    self._client.remove_pending_request(future)  # a late answer is ignored
-                    lost.append(request)
+                    for client in (self._once, self._plain):  # a late answer is ignored
+                        client.remove_pending_request(future)
+                    lost.append(report)
                 else:
-                    waiting.append((future, request, deadline))
+                    waiting.append((future, report, deadline))
             self._in_flight = waiting
             if lost:
                 self._log.warning(f"FaultReporter: {len(lost)} report(s) unanswered after "
