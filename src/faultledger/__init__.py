@@ -7,6 +7,7 @@ from faultledger.domain.policy import Policy
 from faultledger.domain.types import EventType, FaultStatus, NotificationType, Severity
 from faultledger.errors import FaultLedgerError
 from faultledger.service.ledger import FaultLedger, Subscription
+from faultledger.service.requests import ReportRequest
 from faultledger.service.results import ClearResult, FaultLookup, ReportResult, VerifyReport
 
 __all__ = [
@@ -21,6 +22,7 @@ __all__ = [
     "Notification",
     "NotificationType",
     "Policy",
+    "ReportRequest",
     "ReportResult",
     "Severity",
     "Subscription",

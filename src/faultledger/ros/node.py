@@ -1,7 +1,8 @@
 """The `fault_manager` node: ROS services and the events topic over one FaultLedger.
 
-Callbacks only translate: request → FaultLedger call → response. Report callbacks run in a
-reentrant group on a multi-threaded executor, so concurrent clients share group commits.
+Callbacks only translate: request → FaultLedger call → response. A report callback also takes
+the reports queued behind its own (service_queue.py), so a burst from many clients shares
+group commits although the executor runs one callback at a time.
 """
 
 from __future__ import annotations
@@ -10,9 +11,9 @@ import logging
 from typing import Any
 
 from faultledger_msgs.srv import GetHistory, ReportFaultOnce
-from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.service import Service
 from ros2_medkit_msgs.msg import FaultEvent
 from ros2_medkit_msgs.srv import (
     ClearFault,
@@ -26,7 +27,9 @@ from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
 from faultledger.errors import FaultLedgerError
 from faultledger.ros import convert
+from faultledger.ros.service_queue import take_queued
 from faultledger.service.ledger import FaultLedger
+from faultledger.service.requests import ReportRequest
 from faultledger.service.results import ReportResult
 
 log = logging.getLogger(__name__)
@@ -63,22 +66,22 @@ class FaultManagerNode:
     def __init__(self, node: Node, ledger: FaultLedger) -> None:
         self.node = node
         self.ledger = ledger
-        group = ReentrantCallbackGroup()
         self.events = node.create_publisher(FaultEvent, "~/events", EVENTS_QOS)
+        self.report_service = node.create_service(
+            ReportFault, "~/report_fault", self.report_fault, qos_profile=SERVICE_QOS)
+        self.report_once_service = node.create_service(
+            ReportFaultOnce, "~/report_fault_once", self.report_fault_once,
+            qos_profile=SERVICE_QOS)
         services: list[tuple[Any, str, Any]] = [
-            (ReportFault, "~/report_fault", self.report_fault),
-            (ReportFaultOnce, "~/report_fault_once", self.report_fault_once),
             (ListFaults, "~/list_faults", self.list_faults),
             (GetFault, "~/get_fault", self.get_fault),
             (ClearFault, "~/clear_fault", self.clear_fault),
             (ListFaultsForEntity, "~/list_faults_for_entity", self.list_faults_for_entity),
             (GetHistory, "~/get_history", self.get_history),
         ]
-        self.services = [
-            node.create_service(kind, name, callback, qos_profile=SERVICE_QOS,
-                                callback_group=group)
-            for kind, name, callback in services
-        ]
+        self.services = [self.report_service, self.report_once_service, *(
+            node.create_service(kind, name, callback, qos_profile=SERVICE_QOS)
+            for kind, name, callback in services)]
         self.subscription = ledger.subscribe(self.publish)
 
     def publish(self, notification: Notification) -> None:
@@ -86,24 +89,37 @@ class FaultManagerNode:
         self.events.publish(convert.event_msg(notification))
 
     def report_fault(self, request: Any, response: Any) -> Any:
-        response.accepted = self._report(request, event_id=None).accepted
-        return response
+        return self._report_burst(self.report_service, request, response, idempotent=False)
 
     def report_fault_once(self, request: Any, response: Any) -> Any:
-        result = self._report(request, event_id=request.event_id)
-        response.accepted = result.accepted
-        response.duplicate = result.duplicate
-        response.message = "" if result.accepted else result.message
-        return response
+        return self._report_burst(self.report_once_service, request, response, idempotent=True)
 
-    def _report(self, request: Any, event_id: str | None) -> ReportResult:
-        result = self.ledger.report(request.fault_code, request.event_type, request.severity,
-                                    request.description, request.source_id, event_id=event_id)
-        if not result.accepted:
-            self.node.get_logger().warning(
-                f"report of {request.fault_code!r} from {request.source_id!r} rejected: "
-                f"{result.message}")
-        return result
+    def _report_burst(self, service: Service, request: Any, response: Any,
+                      idempotent: bool) -> Any:
+        """Make this report and every one queued behind it durable in shared commits."""
+        queued = take_queued(service)
+        requests = [request, *(r for r, _ in queued)]
+        results = self.ledger.report_many([
+            ReportRequest(r.fault_code, r.event_type, r.severity, r.description, r.source_id,
+                          event_id=r.event_id if idempotent else None)
+            for r in requests])
+        for r, result in zip(requests, results, strict=True):
+            if not result.accepted:
+                self.node.get_logger().warning(
+                    f"report of {r.fault_code!r} from {r.source_id!r} rejected: "
+                    f"{result.message}")
+        kind: Any = service.srv_type
+        for (_, header), result in zip(queued, results[1:], strict=True):
+            service.send_response(self._answer(kind.Response(), result), header)
+        return self._answer(response, results[0])
+
+    @staticmethod
+    def _answer(response: Any, result: ReportResult) -> Any:
+        response.accepted = result.accepted
+        if hasattr(response, "duplicate"):  # ReportFaultOnce
+            response.duplicate = result.duplicate
+            response.message = "" if result.accepted else result.message
+        return response
 
     def list_faults(self, request: Any, response: Any) -> Any:
         severity = request.severity if request.filter_by_severity else None

@@ -7,7 +7,7 @@ import threading
 from types import FrameType
 
 import rclpy
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import ok, try_shutdown
@@ -17,8 +17,21 @@ from faultledger.service.config import Settings
 from faultledger.service.ledger import FaultLedger
 from faultledger.store.database import describe
 
-EXECUTOR_THREADS = 8
-"""Concurrent service callbacks: reports from many clients share group commits."""
+
+def make_executor() -> SingleThreadedExecutor:
+    """The fault manager's executor (bench/ros_report.py measures its echo baseline with it).
+
+    Single-threaded: reports queued during a commit are taken together by the next callback
+    (service_queue.py), which shares fsyncs without the per-call cost of rclpy's
+    multi-threaded executor (bench/ros_report.py; docs/performance.md).
+    """
+    return SingleThreadedExecutor()
+
+
+def spin_until(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
+    """Serve callbacks until ``stop`` is set or the context shuts down."""
+    while not stop.is_set() and ok():
+        executor.spin_once(timeout_sec=0.1)
 
 
 def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
@@ -35,7 +48,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
     node = Node(NODE_NAME)
     ledger: FaultLedger | None = None
     manager: FaultManagerNode | None = None
-    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+    executor = make_executor()
     try:
         node.declare_parameter("database_path", "")
         policy = declare_policy(node, settings.policy)
@@ -50,8 +63,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
         node.get_logger().info(
             f"serving {node.get_fully_qualified_name()} on {describe(url)}: restored "
             f"{restored.faults} faults from {restored.events} events")
-        while not stop.is_set() and ok():
-            executor.spin_once(timeout_sec=0.1)
+        spin_until(executor, stop)
     finally:
         if manager is not None:
             manager.close()

@@ -6,7 +6,7 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from types import TracebackType
@@ -21,6 +21,7 @@ from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Projector, Transition
 from faultledger.errors import FaultLedgerError, InvalidInputError
+from faultledger.service.requests import ReportRequest
 from faultledger.service.results import (
     ClearResult,
     EntityLookup,
@@ -31,6 +32,7 @@ from faultledger.service.results import (
 from faultledger.service.writer import (
     CatchUp,
     Clear,
+    Command,
     ConfirmOverdue,
     Exclusive,
     ReclassifyHealed,
@@ -140,25 +142,27 @@ class FaultLedger:
                description: str = "", source_id: str = "", at: datetime | None = None,
                event_id: str | None = None) -> ReportResult:
         """Record one FAILED/PASSED report; returns once it is durable (or rejected)."""
-        kind = validation.parse_event_type(event_type)
-        problem = validation.report_error(fault_code, event_type, severity, description,
-                                          source_id)
-        if problem is None and event_id is not None:
-            problem = _event_id_error(event_id)
+        return self.report_many([ReportRequest(fault_code, event_type, severity, description,
+                                               source_id, at, event_id)])[0]
+
+    def report_many(self, requests: Sequence[ReportRequest]) -> list[ReportResult]:
+        """Record several reports in order, sharing commits; one result per request.
+
+        For a caller that receives reports in bursts (a ROS service draining its queue, a
+        bridge translating one message into many reports): one wait instead of one per report.
+        """
+        results: list[ReportResult | None] = []
+        commands: list[Command] = []
+        for request in requests:
+            command = _report_command(request)
+            results.append(command if isinstance(command, ReportResult) else None)
+            if not isinstance(command, ReportResult):
+                commands.append(command)
         try:
-            occurred_ns = time.time_ns() if at is None else to_ns(at)
-        except (ValueError, TypeError, AttributeError):
-            problem = problem or "at must be a timezone-aware datetime"
-            occurred_ns = 0
-        if problem is not None or kind is None:
-            return ReportResult(False, problem or "invalid report")
-        event = FaultReported(fault_code, kind, severity, description, source_id)
-        command = Report(event, occurred_ns, event_id or str(uuid.uuid4()), event_id is not None)
-        try:
-            result: ReportResult = self._writer.submit(command)
+            answers = iter(self._writer.submit_all(commands))
         except FaultLedgerError as error:
-            return ReportResult(False, str(error))
-        return result
+            answers = iter([ReportResult(False, str(error))] * len(commands))
+        return [result if result is not None else next(answers) for result in results]
 
     def clear(self, fault_code: str, actor: str = "api", reason: str = "",
               at: datetime | None = None) -> ClearResult:
@@ -406,3 +410,23 @@ def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -
 
 def _instant_ns(moment: datetime | int | None) -> int | None:
     return moment if moment is None or isinstance(moment, int) else to_ns(moment)
+
+
+def _report_command(request: ReportRequest) -> Report | ReportResult:
+    """The writer's command for a valid report, else the rejection naming the problem."""
+    kind = validation.parse_event_type(request.event_type)
+    problem = validation.report_error(request.fault_code, request.event_type, request.severity,
+                                      request.description, request.source_id)
+    if problem is None and request.event_id is not None:
+        problem = _event_id_error(request.event_id)
+    try:
+        occurred_ns = time.time_ns() if request.at is None else to_ns(request.at)
+    except (ValueError, TypeError, AttributeError):
+        problem = problem or "at must be a timezone-aware datetime"
+        occurred_ns = 0
+    if problem is not None or kind is None:
+        return ReportResult(False, problem or "invalid report")
+    event = FaultReported(request.fault_code, kind, request.severity, request.description,
+                          request.source_id)
+    return Report(event, occurred_ns, request.event_id or str(uuid.uuid4()),
+                  request.event_id is not None)

@@ -99,13 +99,21 @@ def _held_lock() -> threading.Lock:
 
 
 @dataclass(slots=True)
+class _Caller:
+    """One thread waiting in ``submit``/``submit_all`` for its commands."""
+
+    unanswered: int
+    wake: threading.Lock = field(default_factory=_held_lock)
+    """Released once: when all its commands are answered, or when it is made leader."""
+
+
+@dataclass(slots=True)
 class _Pending:
     command: Command
+    caller: _Caller
     done: bool = False
     result: Any = None
     error: BaseException | None = None
-    wake: threading.Lock = field(default_factory=_held_lock)
-    """Released once: when the command is answered, or when its caller is made leader."""
 
 
 class _Batch:
@@ -176,32 +184,42 @@ class Writer:
 
     def submit(self, command: Command) -> Any:
         """Queue a command and return its result once it is durable (or failed)."""
+        return self.submit_all([command])[0]
+
+    def submit_all(self, commands: list[Command]) -> list[Any]:
+        """Queue commands together (they share commits); their results once all are durable."""
+        if not commands:
+            return []
         if self._leader == threading.get_ident():
             raise FaultLedgerError(
                 "a subscriber callback cannot report or clear synchronously (the commit that "
                 "called it is still running); hand the call to another thread")
-        pending = _Pending(command)
+        caller = _Caller(len(commands))
+        pendings = [_Pending(command, caller) for command in commands]
+        last = pendings[-1]
         with self._mutex:
             if self._closed:
                 raise LedgerClosedError("the ledger is closed")
-            self._queue.append(pending)
+            self._queue.extend(pendings)
             self._callers += 1
             if self._gathering:
                 self._arrived.notify()
             follow = self._leading
             self._leading = True
         if follow:
-            pending.wake.acquire()  # answered, or handed the leadership
-        if not pending.done:
-            self._lead(pending)
+            caller.wake.acquire()  # all answered, or handed the leadership
+        if not last.done:
+            self._lead(last)
         with self._mutex:
             self._callers -= 1
-        if pending.error is not None:
-            raise pending.error
-        return pending.result
+        for pending in pendings:
+            if pending.error is not None:
+                raise pending.error
+        return [pending.result for pending in pendings]
 
     def _lead(self, own: _Pending) -> None:
-        """Commit queued groups until ``own`` is done, then hand over to the next in line."""
+        """Commit queued groups until ``own`` (its caller's last command) is done, then hand
+        over to the caller next in line."""
         self._leader = threading.get_ident()
         try:
             while not own.done:
@@ -212,13 +230,16 @@ class Writer:
                 for group in _split_exclusive(batch):
                     self._commit(group)
                 for pending in batch:
-                    if pending is not own:
-                        pending.wake.release()
+                    caller = pending.caller
+                    caller.unanswered -= 1
+                    if caller.unanswered == 0 and caller is not own.caller:
+                        caller.wake.release()
         finally:
             self._leader = None
             with self._mutex:
                 if self._queue:
-                    self._queue[0].wake.release()
+                    # Its caller still waits (a caller's commands are contiguous in the queue).
+                    self._queue[0].caller.wake.release()
                 else:
                     self._leading = False
                     self._idle.notify_all()

@@ -1,0 +1,131 @@
+"""ReportFault round trips per second against the fault manager, next to an rclpy echo service.
+
+Both servers use the same request type, QoS, callback group and executor; the clients are
+separate processes with the same call pattern (see _ros_client.py). Runs alternate echo and
+faultledger so that this VM's drift hits both alike; the figures are the medians of the rounds.
+
+Run it in a private network namespace: ``scripts/in-netns .venv/bin/python bench/ros_report.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import statistics
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from _common import BENCH_DIR, header, percentile, ratio, remove_db, scratch_dir, url_for, verdict
+
+TARGET_RATIO = 0.8
+TARGET_SEQUENTIAL = 1_000.0
+TARGET_FOUR = 2_000.0
+
+
+@dataclass
+class Run:
+    rate: float
+    p50_ms: float
+    p99_ms: float
+    rejected: int
+
+
+def start_server(kind: str, db: Path, log: Path) -> subprocess.Popen[str]:
+    if kind == "echo":
+        args = [sys.executable, str(BENCH_DIR / "_ros_echo_server.py")]
+    else:
+        args = [sys.executable, "-m", "faultledger.cli.main", "serve", "--db", url_for(db)]
+    server = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=log.open("w"), text=True)
+    assert server.stdout is not None
+    for line in server.stdout:
+        if line.startswith("fault_manager ready"):
+            return server
+    raise SystemExit(f"{kind} server did not start; see {log}:\n{log.read_text()}")
+
+
+def stop_server(server: subprocess.Popen[str]) -> None:
+    server.send_signal(signal.SIGTERM)
+    try:
+        server.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        server.kill()
+        server.wait()
+
+
+def run_clients(clients: int, calls: int, codes: int) -> Run:
+    procs = [subprocess.Popen([sys.executable, str(BENCH_DIR / "_ros_client.py"), str(calls),
+                               str(n), str(codes)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+             for n in range(clients)]
+    for proc in procs:
+        assert proc.stdout is not None
+        if proc.stdout.readline().strip() != "ready":
+            raise SystemExit("a bench client did not find the service")
+    for proc in procs:  # release them together
+        assert proc.stdin is not None
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+    results = []
+    for proc in procs:
+        out, _ = proc.communicate(timeout=600)
+        results.append(json.loads(out.strip().splitlines()[-1]))
+    latencies = [x for r in results for x in r["latencies"]]
+    elapsed = max(r["elapsed"] for r in results)
+    return Run(len(latencies) / elapsed, percentile(latencies, 0.5) * 1e3,
+               percentile(latencies, 0.99) * 1e3, sum(r["rejected"] for r in results))
+
+
+def measure(kind: str, clients: int, calls: int, codes: int, scratch: Path) -> Run:
+    db = scratch / "faults.db"
+    remove_db(db)
+    server = start_server(kind, db, scratch / f"{kind}.log")
+    try:
+        run_clients(clients, min(200, calls), codes)  # warm-up: discovery, page cache
+        return run_clients(clients, calls, codes)
+    finally:
+        stop_server(server)
+
+
+def median_run(runs: list[Run]) -> Run:
+    return Run(statistics.median(r.rate for r in runs), statistics.median(r.p50_ms for r in runs),
+               statistics.median(r.p99_ms for r in runs), sum(r.rejected for r in runs))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--calls", type=int, default=2000, help="calls per client (default 2000)")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds (default 3)")
+    parser.add_argument("--codes", type=int, default=50, help="fault codes per client")
+    args = parser.parse_args()
+    if os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") != "LOCALHOST":
+        sys.exit("run this in a private network namespace: "
+                 "scripts/in-netns .venv/bin/python bench/ros_report.py")
+    header("ReportFault round trips: faultledger serve vs an rclpy echo service")
+    print(f"   {args.rounds} alternating rounds; {args.calls} sequential calls per client "
+          f"process; FAILED/PASSED alternating over {args.codes} codes per client")
+    with scratch_dir("ros-") as scratch:
+        for clients in (1, 4):
+            runs: dict[str, list[Run]] = {"echo": [], "faultledger": []}
+            for _ in range(args.rounds):
+                for kind in runs:
+                    runs[kind].append(measure(kind, clients, args.calls, args.codes, scratch))
+            echo, ours = median_run(runs["echo"]), median_run(runs["faultledger"])
+            target = TARGET_SEQUENTIAL if clients == 1 else TARGET_FOUR
+            share = ratio(ours.rate, echo.rate)
+            print(f"-- {clients} client process(es)")
+            for name, run in (("echo", echo), ("faultledger", ours)):
+                print(f"   {name:<12} {run.rate:8,.0f} calls/s   p50 {run.p50_ms:6.2f} ms   "
+                      f"p99 {run.p99_ms:6.2f} ms   rejected {run.rejected}")
+            print(f"   ratio {share:.2f}x echo (target >= {TARGET_RATIO}x: "
+                  f"{verdict(share >= TARGET_RATIO)}); {ours.rate:,.0f}/s "
+                  f"(target >= {target:,.0f}/s: {verdict(ours.rate >= target)})")
+            print(f"   rounds: echo {[round(r.rate) for r in runs['echo']]}, "
+                  f"faultledger {[round(r.rate) for r in runs['faultledger']]}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
