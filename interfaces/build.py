@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-PACKAGES = ("ros2_medkit_msgs", "faultledger_msgs")
-"""Build order: a package may depend on the ones before it."""
+PACKAGES = tuple(sorted(p.parent.name for p in HERE.glob("*/package.xml")))
+"""Every package directory here; none depends on another of ours."""
 SHARED = (HERE / "pypi_wheels_fix.cmake",)
 
 

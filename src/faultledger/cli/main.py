@@ -290,6 +290,25 @@ def serve(
     raise typer.Exit(run_node(settings_for(config), db, list(ctx.args)))
 
 
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def bridge(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(
+        help="action-status, node-state, hardware-status or diagnostics.")],
+    config: Annotated[Path | None, typer.Option(
+        "--config", help="The bridge's YAML settings (see config/<bridge>.yaml).")] = None,
+) -> None:
+    """Run one bridge as its own ROS node, reporting to /fault_manager until SIGINT/SIGTERM.
+
+    ROS arguments follow, e.g. `--ros-args -r __ns:=/robot1`.
+    """
+    try:
+        from faultledger.ros.bridges.runner import run_bridge
+    except ImportError as error:
+        fail(f"ROS 2 is not installed in this environment ({error}); run `make interfaces`")
+    raise typer.Exit(run_bridge(name, config, list(ctx.args)))
+
+
 @app.command()
 def demo(db: DbOption = None, config: ConfigOption = None) -> None:
     """A short scripted scenario: PREFAILED -> CONFIRMED -> HEALED -> CLEARED, with history."""

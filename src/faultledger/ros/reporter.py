@@ -42,6 +42,7 @@ class _Report(NamedTuple):
     severity: int
     description: str
     event_id: str
+    source_id: str
 
 
 class FaultReporter:
@@ -49,7 +50,10 @@ class FaultReporter:
 
     def __init__(self, node: Node, source_id: str, *,
                  manager: str = "/fault_manager", queue_size: int = 1000,
-                 response_timeout_sec: float = 5.0, flush_period_sec: float = 0.25) -> None:
+                 response_timeout_sec: float = 5.0, flush_period_sec: float = 0.25,
+                 local_filtering: bool = True) -> None:
+        """``local_filtering=False`` forwards every report and ignores the filter parameters:
+        for bridges, whose reports are edge-triggered already."""
         self._log = node.get_logger()
         if not source_id:
             self._log.warning("FaultReporter: empty source_id; the manager will reject reports")
@@ -59,7 +63,8 @@ class FaultReporter:
         self._source_id = source_id
         self._queue_size = queue_size
         self._timeout = response_timeout_sec
-        self._filter = LocalFilter(self._read_parameters(node))
+        self._filter = LocalFilter(self._read_parameters(node) if local_filtering
+                                   else FilterConfig(enabled=False))
         self._lock = threading.Lock()  # report() may run on any thread, the timer on the executor
         self._queue: deque[_Report] = deque()  # oldest first
         self._in_flight: list[tuple[Future, _Report, float]] = []  # (future, report, deadline)
@@ -75,8 +80,13 @@ class FaultReporter:
                                          qos_profile=qos, callback_group=group)
         self._timer = node.create_timer(flush_period_sec, self._on_timer, callback_group=group)
 
-    def report(self, fault_code: str, severity: int, description: str = "") -> bool:
-        """Report a FAILED event; True if sent or queued, False if filtered out or unusable."""
+    def report(self, fault_code: str, severity: int, description: str = "", *,
+               source_id: str | None = None) -> bool:
+        """Report a FAILED event; True if sent or queued, False if filtered out or unusable.
+
+        ``source_id`` overrides the reporter's for this report: a bridge reports on behalf
+        of the nodes and devices it watches.
+        """
         if not self._usable(fault_code):
             return False
         if not 0 <= severity <= 255:  # would not fit the uint8 field; the manager takes 0..3
@@ -86,10 +96,10 @@ class FaultReporter:
             if not self._filter.should_forward(fault_code, severity):
                 return False
             self._enqueue(_Report(fault_code, ReportFault.Request.EVENT_FAILED, severity,
-                                  description, str(uuid.uuid4())))
+                                  description, str(uuid.uuid4()), source_id or self._source_id))
         return True
 
-    def report_passed(self, fault_code: str) -> bool:
+    def report_passed(self, fault_code: str, *, source_id: str | None = None) -> bool:
         """Report a PASSED event (the check succeeded); True if sent or queued."""
         if not self._usable(fault_code):
             return False
@@ -97,7 +107,7 @@ class FaultReporter:
             if not self._filter.should_forward_passed(fault_code):
                 return False
             self._enqueue(_Report(fault_code, ReportFault.Request.EVENT_PASSED, 0, "",
-                                  str(uuid.uuid4())))
+                                  str(uuid.uuid4()), source_id or self._source_id))
         return True
 
     @property
@@ -160,7 +170,7 @@ class FaultReporter:
             report = self._queue.popleft()
             request = kind(fault_code=report.fault_code, event_type=report.event_type,
                            severity=report.severity, description=report.description,
-                           source_id=self._source_id)
+                           source_id=report.source_id)
             if kind is ReportFaultOnce.Request:
                 request.event_id = report.event_id
             self._in_flight.append((client.call_async(request), report, deadline))

@@ -12,6 +12,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import ok, try_shutdown
 
+from faultledger.ros.bridges.runner import RunningBridge, settings_from, start_bridge
 from faultledger.ros.node import NODE_NAME, FaultManagerNode, declare_policy
 from faultledger.service.config import Settings
 from faultledger.service.ledger import FaultLedger
@@ -48,6 +49,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
     node = Node(NODE_NAME)
     ledger: FaultLedger | None = None
     manager: FaultManagerNode | None = None
+    bridges: list[RunningBridge] = []
     executor = make_executor()
     try:
         node.declare_parameter("database_path", "")
@@ -57,6 +59,10 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
         ledger = FaultLedger.open(url, policy=policy, max_batch=settings.database.max_batch)
         manager = FaultManagerNode(node, ledger)
         executor.add_node(node)
+        for name, entry in settings.bridges.items():
+            if entry.get("enabled", False):
+                bridges.append(start_bridge(name, settings_from(entry), executor,
+                                            manager=node.get_fully_qualified_name()))
         restored = ledger.restored
         print(f"fault_manager ready: db={describe(url)} faults={restored.faults} "
               f"events={restored.events} replayed={restored.replayed}", flush=True)
@@ -65,6 +71,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
             f"{restored.faults} faults from {restored.events} events")
         spin_until(executor, stop)
     finally:
+        for bridge in bridges:
+            bridge.close()
         if manager is not None:
             manager.close()
         executor.shutdown()

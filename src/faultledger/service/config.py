@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -26,6 +27,9 @@ class Settings(BaseModel):
 
     database: DatabaseSettings = Field(default_factory=DatabaseSettings)
     policy: Policy = Field(default_factory=Policy)
+    bridges: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    """Bridges `faultledger serve` runs: name → {enabled, config: FILE, inline settings}.
+    Validated by the ROS adapter when it starts them (the core does not import ROS)."""
 
 
 def load_settings(path: Path | None) -> Settings:
