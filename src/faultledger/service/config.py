@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from faultledger.domain.policy import Policy
+from faultledger.domain.shifts import ShiftCalendar
 from faultledger.errors import ConfigError
 
 DEFAULT_DATABASE_URL = "sqlite:///var/faultledger.db"
+M = TypeVar("M", bound=BaseModel)
 
 
 class DatabaseSettings(BaseModel):
@@ -36,23 +38,32 @@ def load_settings(path: Path | None) -> Settings:
     """Settings from a YAML file, or the built-in defaults when no file is given."""
     if path is None:
         return Settings()
+    return _load(path, Settings, "config file")
+
+
+def load_shift_calendar(path: Path) -> ShiftCalendar:
+    """``config/shifts.yaml``: refused as a whole, with located messages, when invalid."""
+    return _load(path, ShiftCalendar, "shift calendar")
+
+
+def _load(path: Path, model: type[M], what: str) -> M:
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
-        raise ConfigError(f"cannot read config file {path}: {error}") from None
+        raise ConfigError(f"cannot read {what} {path}: {error}") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as error:
-        raise ConfigError(f"config file {path} is not valid YAML: {error}") from None
+        raise ConfigError(f"{what} {path} is not valid YAML: {error}") from None
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise ConfigError(f"config file {path} must contain a mapping at the top level")
+        raise ConfigError(f"{what} {path} must contain a mapping at the top level")
     try:
-        return Settings.model_validate(data)
+        return model.model_validate(data)
     except ValidationError as error:
         problems = "; ".join(
             f"{'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}"
             for e in error.errors()
         )
-        raise ConfigError(f"config file {path} is invalid: {problems}") from None
+        raise ConfigError(f"{what} {path} is invalid: {problems}") from None
