@@ -309,6 +309,26 @@ def bridge(
     raise typer.Exit(run_bridge(name, config, list(ctx.args)))
 
 
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def nodes(
+    ctx: typer.Context,
+    topic: Annotated[str, typer.Option(help="NodeState topic to listen on.")] = "/nodemon/state",
+    once: Annotated[bool, typer.Option(
+        "--once", help="Print one snapshot after --listen-sec and exit.")] = False,
+    listen_sec: Annotated[float, typer.Option(
+        "--listen-sec", min=0.0, help="With --once: how long to listen first.")] = 2.0,
+) -> None:
+    """Live view of every node's nodemon heartbeat (state, age, messages) until Ctrl-C.
+
+    ROS arguments follow, e.g. `--ros-args -r __ns:=/robot1`.
+    """
+    try:
+        from faultledger.ros.nodes_view import run_nodes_view
+    except ImportError as error:
+        fail(f"ROS 2 is not installed in this environment ({error}); run `make interfaces`")
+    raise typer.Exit(run_nodes_view(topic, once, listen_sec, list(ctx.args)))
+
+
 @app.command()
 def demo(db: DbOption = None, config: ConfigOption = None) -> None:
     """A short scripted scenario: PREFAILED -> CONFIRMED -> HEALED -> CLEARED, with history."""
