@@ -4,6 +4,8 @@ from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
+from faultledger.domain.shifts import ShiftCalendar
+from faultledger.domain.stat_rows import StatsRow
 from faultledger.domain.types import EventType, FaultStatus, NotificationType, Severity
 from faultledger.errors import FaultLedgerError
 from faultledger.service.ledger import FaultLedger, Subscription
@@ -25,6 +27,8 @@ __all__ = [
     "ReportRequest",
     "ReportResult",
     "Severity",
+    "ShiftCalendar",
+    "StatsRow",
     "Subscription",
     "VerifyReport",
 ]

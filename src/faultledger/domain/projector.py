@@ -7,6 +7,7 @@ from typing import NamedTuple
 
 from faultledger.domain import debounce
 from faultledger.domain.events import (
+    DomainEvent,
     FaultCleared,
     FaultConfirmedByTimer,
     FaultReported,
@@ -17,19 +18,11 @@ from faultledger.domain.events import (
 from faultledger.domain.fault import Fault
 from faultledger.domain.notifications import for_status_change
 from faultledger.domain.policy import Policy
+from faultledger.domain.statistics import StatsFold
+from faultledger.domain.transition import Transition
 from faultledger.domain.types import EVENT_TYPE_NAMES, FaultStatus, NotificationType
 
-
-class Transition(NamedTuple):
-    """A status change of one fault, caused by the record ``seq`` (from_status None: created)."""
-
-    seq: int
-    fault_code: str
-    from_status: FaultStatus | None
-    to_status: FaultStatus
-    at_ns: int
-    cause: str
-    source_id: str
+__all__ = ["Effect", "Projector", "Transition"]
 
 
 class Effect(NamedTuple):
@@ -57,7 +50,10 @@ class Projector:
         seq: int = 0,
         policy_recorded: bool = False,
         policy_seq: int = 0,
+        stats: StatsFold | None = None,
     ) -> None:
+        self.stats = stats
+        """The statistics fold, when this projector feeds the persisted projections."""
         self._faults: dict[str, Fault] = dict(faults or {})
         self._staged: dict[str, Fault] | None = None
         self._saved: tuple[Policy, int, bool, int] | None = None
@@ -104,6 +100,8 @@ class Projector:
 
     # -- staging -----------------------------------------------------------------------------
     def stage(self) -> None:
+        if self.stats is not None:
+            self.stats.stage()
         self._staged = {}
         self._saved = (self.policy, self.seq, self.policy_recorded, self.policy_seq)
 
@@ -111,12 +109,16 @@ class Projector:
         return list((self._staged or {}).values())
 
     def commit(self) -> None:
+        if self.stats is not None:
+            self.stats.commit()
         if self._staged:
             self._faults.update(self._staged)
         self._staged = None
         self._saved = None
 
     def rollback(self) -> None:
+        if self.stats is not None:
+            self.stats.rollback()
         if self._saved is not None:
             self.policy, self.seq, self.policy_recorded, self.policy_seq = self._saved
         self._staged = None
@@ -143,6 +145,13 @@ class Projector:
             raise ValueError(f"record seq {record.seq} does not follow {self.seq}")
         self.seq = record.seq
         event = record.event
+        effect = self._apply(record, event)
+        if self.stats is not None and not isinstance(event, PolicyChanged):
+            fault = effect.fault or self.get(event.fault_code)
+            self.stats.observe(record, effect.transition, fault)
+        return effect
+
+    def _apply(self, record: LogRecord, event: DomainEvent) -> Effect:
         if isinstance(event, FaultReported):
             return self._reported(record, event)
         if isinstance(event, FaultCleared):

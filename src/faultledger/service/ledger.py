@@ -18,9 +18,14 @@ from faultledger.domain.clock import to_ns
 from faultledger.domain.events import FaultCleared, FaultReported, LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.notifications import Notification
+from faultledger.domain.periods import default_calendar
 from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Projector, Transition
+from faultledger.domain.shifts import ShiftCalendar
+from faultledger.domain.stat_rows import StatsRow
+from faultledger.domain.statistics import StatsFold
 from faultledger.errors import FaultLedgerError, InvalidInputError
+from faultledger.service import statistics
 from faultledger.service.requests import ReportRequest
 from faultledger.service.results import (
     ClearResult,
@@ -40,7 +45,7 @@ from faultledger.service.writer import (
     Report,
     Writer,
 )
-from faultledger.store import event_log, migrate, projections
+from faultledger.store import event_log, migrate, projections, stat_tables
 from faultledger.store.database import Database
 
 log = logging.getLogger(__name__)
@@ -76,14 +81,16 @@ class FaultLedger:
         self._subscriptions_lock = threading.Lock()
         self._writer = Writer(db, projector, policy, self._announce, max_batch)
         self.restored = restored
+        self.calendar: ShiftCalendar = default_calendar()
+        """The shift calendar ``stats`` uses unless a call names another."""
         self._stop = threading.Event()
         self._ticker: threading.Thread | None = None
 
     # -- lifecycle -------------------------------------------------------------------------------
     @classmethod
     def open(cls, url: str, policy: Policy | None = None, *, max_batch: int = 512,
-             upgrade: bool = True, create: bool = True, background: bool | None = None
-             ) -> FaultLedger:
+             upgrade: bool = True, create: bool = True, background: bool | None = None,
+             calendar: ShiftCalendar | None = None) -> FaultLedger:
         """Open (create, migrate) the database and restore state: projections + log tail.
 
         With a ``policy`` this process is a serving writer: the policy is recorded when it
@@ -99,6 +106,8 @@ class FaultLedger:
             db.dispose()
             raise
         ledger = cls(db, projector, policy, max_batch, restored)
+        if calendar is not None:
+            ledger.calendar = calendar
         try:
             if policy is not None:
                 ledger._writer.submit(RecordPolicy())
@@ -193,6 +202,7 @@ class FaultLedger:
             projections.replace_all(conn, projector.committed(), replayed,
                                     projections.Checkpoint(*event_log.head(conn),
                                                            projector.policy_seq))
+            stat_tables.replace_all(conn, _stats(projector).take(), projector.seq)
             writer.projector = projector
             return projector.seq
 
@@ -250,6 +260,19 @@ class FaultLedger:
         )
         with self._db.reading() as conn:
             return event_log.find(conn, where)
+
+    def stats(self, by: str = "shift", since: datetime | str | None = None,
+              until: datetime | str | None = None, codes: Sequence[str] | None = None,
+              group_by: Sequence[str] = (), *, calendar: ShiftCalendar | None = None,
+              as_of: datetime | None = None) -> list[StatsRow]:
+        """Figures per period (and group) of docs/statistics.md over [since, until).
+
+        Bounds may be datetimes, ISO dates or date-times (local to the calendar's zone) or
+        shift ids; ``as_of`` (default now) ends the CONFIRMED episodes still open.
+        """
+        query = statistics.StatsQuery(by, since, until, codes, group_by,
+                                      calendar or self.calendar, as_of)
+        return statistics.compute(self._db, query)
 
     def transitions(self, code: str | None = None) -> list[Transition]:
         with self._db.reading() as conn:
@@ -346,8 +369,13 @@ def _event_id_error(event_id: str) -> str | None:
 
 
 def _replay(conn: Connection, upto: int | None = None) -> tuple[Projector, list[Transition]]:
-    projector = Projector()
+    projector = Projector(stats=StatsFold())
     return projector, projector.apply_all(event_log.read(conn, upto_seq=upto))
+
+
+def _stats(projector: Projector) -> StatsFold:
+    assert projector.stats is not None, "this projector feeds no statistics"
+    return projector.stats
 
 
 def _restore(db: Database) -> tuple[Projector, Restored]:
@@ -355,14 +383,19 @@ def _restore(db: Database) -> tuple[Projector, Restored]:
     with db.reading() as conn:
         checkpoint = projections.load_checkpoint(conn)
         policy = event_log.policy_at(conn, checkpoint.policy_seq)
+        stats_seq = stat_tables.checkpoint_seq(conn)
+        tracks = stat_tables.load_tracks(conn) if stats_seq == checkpoint.seq else None
         projector = Projector(
             projections.load_faults(conn),
             Policy.model_validate(policy.policy) if policy else None,
             checkpoint.seq,
             policy_recorded=policy is not None,
             policy_seq=checkpoint.policy_seq,
+            stats=StatsFold(tracks),
         )
         stored_seq = event_log.head(conn)[0]
+    if tracks is None:
+        projector.stats = _catch_up_statistics(db, checkpoint.seq, stats_seq)
     if stored_seq < checkpoint.seq:
         log.warning("the log ends at seq %d but the projections include seq %d: records were "
                     "deleted; writes are refused (run `faultledger verify`)",
@@ -382,6 +415,7 @@ def _persist_tail(db: Database, projector: Projector) -> Projector:
             found = projector.apply_all(event_log.read(conn, after_seq=projector.seq))
             projections.save(conn, projector.staged_faults(), found,
                              projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
+            stat_tables.save(conn, _stats(projector).take(), projector.seq)
         projector.commit()
     except FaultLedgerError as error:
         projector.rollback()
@@ -389,7 +423,26 @@ def _persist_tail(db: Database, projector: Projector) -> Projector:
                     error)
         with db.reading() as conn:
             projector.apply_all(event_log.read(conn, after_seq=projector.seq))
+        _stats(projector).take()
     return projector
+
+
+def _catch_up_statistics(db: Database, upto: int, stats_seq: int) -> StatsFold:
+    """Statistics tables behind the projections (first open after the upgrade that created
+    them): fold the log up to the projections' seq and write them all."""
+    with db.reading() as conn:
+        replayed = Projector(stats=StatsFold())
+        replayed.apply_all(event_log.read(conn, upto_seq=upto))
+    fold = _stats(replayed)
+    output = fold.take()
+    log.info("statistics include seq %d of %d: computing them from the log", stats_seq, upto)
+    try:
+        with db.writing() as conn:
+            stat_tables.replace_all(conn, output, upto)
+    except FaultLedgerError as error:
+        log.warning("statistics cannot be saved (%s); they are incomplete until a writer "
+                    "opens this database", error)
+    return StatsFold(fold.tracks())
 
 
 def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -> list[str]:

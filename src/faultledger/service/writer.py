@@ -40,7 +40,7 @@ from faultledger.errors import (
     WriteConflictError,
 )
 from faultledger.service.results import ClearResult, ReportResult
-from faultledger.store import event_log, projections
+from faultledger.store import event_log, projections, stat_tables
 from faultledger.store.database import Database, WriteConnection
 
 log = logging.getLogger(__name__)
@@ -326,6 +326,8 @@ class Writer:
                     projections.save(conn, projector.staged_faults(), batch.transitions,
                                      projections.Checkpoint(projector.seq, head_hash,
                                                             projector.policy_seq))
+                    if projector.stats is not None:
+                        stat_tables.save(conn, projector.stats.take(), projector.seq)
         except BaseException:
             projector.rollback()
             raise
@@ -355,6 +357,8 @@ class Writer:
                 "the database was replaced or truncated underneath; restart faultledger"
             )
         projector.apply_all(event_log.read(conn, after_seq=projector.seq))
+        if projector.stats is not None:
+            projector.stats.take()  # the other process saved these too
 
     def _ensure_policy(self, batch: _Batch) -> None:
         """Record the effective policy before the first record that depends on it."""

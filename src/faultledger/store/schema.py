@@ -80,3 +80,79 @@ of the policy_changed record in force (so startup finds the policy without a log
 The hash anchors the head of the chain, so deleting the newest records is detected too.
 Every index on ``events`` costs each append; only the ones queries need exist.
 """
+
+# -- statistics projections (docs/statistics.md, "How they are served") ------------------------
+stat_facts = Table(
+    "stat_facts",
+    metadata,
+    Column("seq", SeqType, primary_key=True, autoincrement=False),
+    Column("at_ns", BigInteger, nullable=False),
+    Column("fault_code", String(128), nullable=False),
+    Column("source_id", Text, nullable=False),
+    Column("severity", Integer, nullable=False),
+    Column("failed", Integer, nullable=False),
+    Column("passed", Integer, nullable=False),
+    Column("activation", Integer, nullable=False),
+    Column("occurrence", Integer, nullable=False),
+    Column("confirmation", Integer, nullable=False),
+    Column("heal", Integer, nullable=False),
+    Column("clear", Integer, nullable=False),
+    Column("chatter", Integer, nullable=False),
+)
+Index("ix_stat_facts_at", stat_facts.c.at_ns)
+Index("ix_stat_facts_code_at", stat_facts.c.fault_code, stat_facts.c.at_ns)
+Index("ix_stat_facts_confirmation_at", stat_facts.c.at_ns,
+      sqlite_where=stat_facts.c.confirmation == 1,
+      postgresql_where=stat_facts.c.confirmation == 1)
+Index("ix_stat_facts_chatter_at", stat_facts.c.at_ns,
+      sqlite_where=stat_facts.c.chatter == 1, postgresql_where=stat_facts.c.chatter == 1)
+
+stat_episodes = Table(
+    "stat_episodes",
+    metadata,
+    Column("start_seq", SeqType, primary_key=True, autoincrement=False),
+    Column("fault_code", String(128), nullable=False),
+    Column("source_id", Text, nullable=False),
+    Column("severity", Integer, nullable=False),
+    Column("start_ns", BigInteger, nullable=False),
+    Column("end_seq", BigInteger, nullable=True),
+    Column("end_ns", BigInteger, nullable=True),
+)
+Index("ix_stat_episodes_code_start", stat_episodes.c.fault_code, stat_episodes.c.start_ns)
+Index("ix_stat_episodes_start", stat_episodes.c.start_ns)
+Index("ix_stat_episodes_end", stat_episodes.c.end_ns)
+STALE_AFTER_NS = 24 * 3600 * 1_000_000_000
+_LONG = stat_episodes.c.end_ns - stat_episodes.c.start_ns >= STALE_AFTER_NS
+Index("ix_stat_episodes_long_end", stat_episodes.c.end_ns, sqlite_where=_LONG,
+      postgresql_where=_LONG)
+
+stat_minutes = Table(
+    "stat_minutes",
+    metadata,
+    Column("minute", BigInteger, primary_key=True, autoincrement=False),
+    Column("failed", Integer, nullable=False),
+    Column("passed", Integer, nullable=False),
+    Column("activation", Integer, nullable=False),
+    Column("occurrence", Integer, nullable=False),
+    Column("confirmation", Integer, nullable=False),
+    Column("heal", Integer, nullable=False),
+    Column("clear", Integer, nullable=False),
+    Column("starts", Integer, nullable=False),
+    Column("start_offset_ns", BigInteger, nullable=False),
+    Column("ends", Integer, nullable=False),
+    Column("end_offset_ns", BigInteger, nullable=False),
+    Column("repair_ns", BigInteger, nullable=False),
+)
+"""Sums per minute of ``at_ns`` (minute = at_ns // 60e9). Episode starts and ends keep their
+offsets within the minute, so active time over whole minutes is exact; ``ends`` doubles as
+the repair count."""
+
+stat_codes = Table(
+    "stat_codes",
+    metadata,
+    Column("fault_code", String(128), primary_key=True),
+    Column("last_failed", Boolean, nullable=False),
+    Column("activations", Text, nullable=False),
+    Column("episode_start_seq", BigInteger, nullable=True),
+)
+"""The statistics fold's per-code state (domain.statistics.CodeTrack)."""

@@ -1,0 +1,64 @@
+"""The answer of ``FaultLedger.stats``: one row per period and group (docs/statistics.md)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from faultledger.domain.shifts import Period
+
+GROUP_KEYS = ("code", "source", "severity")
+"""What ``group_by`` may name."""
+
+COUNT_METRICS = ("failed_reports", "passed_reports", "activations", "occurrences",
+                 "confirmations", "heals", "clears")
+
+
+@dataclass(frozen=True, slots=True)
+class StatsRow:
+    """Figures of one period for one group (``group`` is empty without ``group_by``).
+
+    Optional figures are None where they are undefined (no confirmations, no repairs).
+    """
+
+    period: Period
+    group: dict[str, str | int] = field(default_factory=dict)
+    failed_reports: int = 0
+    passed_reports: int = 0
+    activations: int = 0
+    occurrences: int = 0
+    confirmations: int = 0
+    heals: int = 0
+    clears: int = 0
+    active_seconds: float = 0.0
+    repairs: int = 0
+    mttr_seconds: float | None = None
+    mtbf_seconds: float | None = None
+    confirmations_per_10min: float = 0.0
+    flood_windows: int = 0
+    flood_seconds: float = 0.0
+    flood_percent: float = 0.0
+    chattering_codes: int = 0
+    stale_codes: int = 0
+    top10_share: float | None = None
+
+    @property
+    def period_seconds(self) -> float:
+        return (self.period.end - self.period.start).total_seconds()
+
+    def as_dict(self) -> dict[str, Any]:
+        """Flat, JSON-ready: period fields first, then the group keys, then the figures."""
+        figures = asdict(self)
+        figures.pop("period")
+        group = figures.pop("group")
+        period = self.period
+        return {
+            "period": period.id,
+            "period_name": period.name,
+            "production_day": None if period.production_day is None
+            else period.production_day.isoformat(),
+            "start": period.start.isoformat(),
+            "end": period.end.isoformat(),
+            **group,
+            **figures,
+        }

@@ -1,0 +1,208 @@
+"""The statistics fold: which records count as what (docs/statistics.md, "What is counted").
+
+It rides along the Projector, so every path that applies records (append, replay, catch-up,
+rebuild) derives the same facts. Its per-code state is small and persisted with the
+projections, so a restart continues the fold instead of re-reading the log.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from faultledger.domain.events import FaultReported, LogRecord
+from faultledger.domain.fault import Fault
+from faultledger.domain.transition import Transition
+from faultledger.domain.types import EventType, FaultStatus
+
+CHATTER_WINDOW_NS = 60 * 1_000_000_000
+"""Three activations of one code within less than this are chattering (ISA-18.2)."""
+
+
+class StatFact(NamedTuple):
+    """What one record counts for; flags are 0/1 so sums are counts."""
+
+    seq: int
+    at_ns: int
+    code: str
+    source: str
+    severity: int
+    failed: int = 0
+    passed: int = 0
+    activation: int = 0
+    occurrence: int = 0
+    confirmation: int = 0
+    heal: int = 0
+    clear: int = 0
+    chatter: int = 0
+
+
+class Episode(NamedTuple):
+    """Time in CONFIRMED, owned by the code, source and severity of the confirming fact.
+
+    ``end_ns`` is never before ``start_ns``: when the reporter's clock ran backwards the
+    episode lasts 0 s.
+    """
+
+    start_seq: int
+    code: str
+    source: str
+    severity: int
+    start_ns: int
+    end_seq: int | None = None
+    end_ns: int | None = None
+
+    @property
+    def repair_ns(self) -> int:
+        return 0 if self.end_ns is None else self.end_ns - self.start_ns
+
+
+class CodeTrack(NamedTuple):
+    """The fold's memory of one code."""
+
+    last_failed: bool = False
+    activations: tuple[int, ...] = ()
+    """Times of the last two activations, oldest first (for chattering)."""
+    episode: Episode | None = None
+    """The open CONFIRMED episode."""
+
+
+class StatsOutput(NamedTuple):
+    """What records applied since the last ``take`` produced, for the store to persist."""
+
+    facts: list[StatFact]
+    started: list[Episode]
+    """Episodes that began (their latest version: possibly already ended)."""
+    ended: list[Episode]
+    """Episodes that ended (with their start)."""
+    tracks: dict[str, CodeTrack]
+
+
+def is_chattering(times: tuple[int, ...]) -> bool:
+    return len(times) >= 3 and max(times[-3:]) - min(times[-3:]) < CHATTER_WINDOW_NS
+
+
+class StatsFold:
+    """Stats facts from (record, transition, fault after); staged like the Projector."""
+
+    def __init__(self, tracks: dict[str, CodeTrack] | None = None) -> None:
+        self._tracks: dict[str, CodeTrack] = dict(tracks or {})
+        self._staged: dict[str, CodeTrack] | None = None
+        self._out = StatsOutput([], [], [], {})
+        self._started_at: dict[int, int] = {}
+        """start_seq → index in ``_out.started`` (ending an episode finds it in O(1))."""
+        self._saved_len: tuple[int, int, int] | None = None
+        self._saved_tracks: dict[str, CodeTrack] | None = None
+
+    def track(self, code: str) -> CodeTrack:
+        if self._staged is not None and code in self._staged:
+            return self._staged[code]
+        return self._tracks.get(code, _NEW)
+
+    def tracks(self) -> dict[str, CodeTrack]:
+        merged = dict(self._tracks)
+        if self._staged:
+            merged.update(self._staged)
+        return merged
+
+    # -- staging (mirrors Projector) --------------------------------------------------------
+    def stage(self) -> None:
+        self._staged = {}
+        self._saved_len = (len(self._out.facts), len(self._out.started), len(self._out.ended))
+        self._saved_tracks = dict(self._out.tracks)
+
+    def commit(self) -> None:
+        if self._staged:
+            self._tracks.update(self._staged)
+        self._staged = None
+        self._saved_len = None
+        self._saved_tracks = None
+
+    def rollback(self) -> None:
+        if self._saved_len is not None and self._saved_tracks is not None:
+            facts, started, ended = self._saved_len
+            del self._out.facts[facts:]
+            del self._out.started[started:]
+            del self._out.ended[ended:]
+            self._out.tracks.clear()
+            self._out.tracks.update(self._saved_tracks)
+            self._started_at = {e.start_seq: i for i, e in enumerate(self._out.started)}
+        self._staged = None
+        self._saved_len = None
+        self._saved_tracks = None
+
+    def take(self) -> StatsOutput:
+        """Hand over (and forget) what was produced since the last call."""
+        out = self._out
+        self._out = StatsOutput([], [], [], {})
+        self._started_at = {}
+        if self._saved_len is not None:
+            self._saved_len = (0, 0, 0)
+            self._saved_tracks = {}
+        return out
+
+    def _put(self, code: str, track: CodeTrack) -> None:
+        if self._staged is not None:
+            self._staged[code] = track
+        else:
+            self._tracks[code] = track
+        self._out.tracks[code] = track
+
+    # -- the fold -----------------------------------------------------------------------------
+    def observe(self, record: LogRecord, transition: Transition | None,
+                fault: Fault | None) -> None:
+        event = record.event
+        report = event if isinstance(event, FaultReported) else None
+        if report is None and transition is None:
+            return
+        code = report.fault_code if report is not None else transition.fault_code  # type: ignore[union-attr]
+        track = self.track(code)
+        at = record.occurred_at_ns
+        failed = report is not None and report.event_type is EventType.FAILED
+        activation = failed and not track.last_failed
+        chatter = False
+        activations = track.activations
+        if activation:
+            activations = (*activations, at)
+            chatter = is_chattering(activations)
+            activations = activations[-2:]
+        last_failed = failed if report is not None else track.last_failed
+        to = transition.to_status if transition is not None else None
+        came = transition.from_status if transition is not None else None
+        if to is FaultStatus.CLEARED:
+            last_failed = False
+        source = transition.source_id if transition is not None else report.source_id  # type: ignore[union-attr]
+        severity = fault.severity if fault is not None else (
+            report.severity if report is not None else 0)
+        fact = StatFact(
+            record.seq, at, code, source, severity,
+            failed=int(failed),
+            passed=int(report is not None and not failed),
+            activation=int(activation),
+            occurrence=int(failed and transition is not None
+                           and (came is None or came is FaultStatus.CLEARED)),
+            confirmation=int(to is FaultStatus.CONFIRMED),
+            heal=int(to is FaultStatus.HEALED),
+            clear=int(to is FaultStatus.CLEARED),
+            chatter=int(chatter),
+        )
+        self._out.facts.append(fact)
+        episode = track.episode
+        if came is FaultStatus.CONFIRMED and episode is not None:
+            ended = episode._replace(end_seq=record.seq, end_ns=max(at, episode.start_ns))
+            self._out.ended.append(ended)
+            self._replace_started(ended)
+            episode = None
+        if to is FaultStatus.CONFIRMED:
+            episode = Episode(record.seq, code, source, severity, at)
+            self._started_at[record.seq] = len(self._out.started)
+            self._out.started.append(episode)
+        self._put(code, CodeTrack(last_failed, activations, episode))
+
+    def _replace_started(self, ended: Episode) -> None:
+        """An episode that starts and ends in one output is written once, ended."""
+        index = self._started_at.get(ended.start_seq)
+        if index is not None:
+            self._out.started[index] = ended
+
+
+_NEW = CodeTrack()
