@@ -41,10 +41,10 @@ def upgrade() -> None:
     )
     op.create_index("ix_stat_facts_at", "stat_facts", ["at_ns"])
     op.create_index("ix_stat_facts_code_at", "stat_facts", ["fault_code", "at_ns"])
-    op.create_index("ix_stat_facts_confirmation_at", "stat_facts", ["at_ns"],
+    op.create_index("ix_stat_facts_confirmation_at", "stat_facts", ["at_ns", "fault_code"],
                     sqlite_where=sa.text("confirmation = 1"),
                     postgresql_where=sa.text("confirmation = 1"))
-    op.create_index("ix_stat_facts_chatter_at", "stat_facts", ["at_ns"],
+    op.create_index("ix_stat_facts_chatter_at", "stat_facts", ["at_ns", "fault_code"],
                     sqlite_where=sa.text("chatter = 1"), postgresql_where=sa.text("chatter = 1"))
 
     op.create_table(

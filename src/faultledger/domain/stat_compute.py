@@ -1,15 +1,16 @@
 """Figures per period from the statistics projections (definitions: docs/statistics.md).
 
 Two ways in, one way out: ``from_facts`` reads individual facts and episodes (any filter or
-grouping, any bounds); ``from_minutes`` adds up per-minute sums (all codes, minute bounds).
+grouping, any bounds); ``from_sums`` takes per-period sums of the per-minute table (all
+codes, minute bounds).
 Both fill the same ``_Tally`` per row and finish it with ``_row``.
 """
 
 from __future__ import annotations
 
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +28,8 @@ NS_PER_MINUTE = 60 * NS_PER_SECOND
 _FLAGS = ("failed", "passed", "activation", "occurrence", "confirmation", "heal", "clear")
 
 GroupKey = tuple[tuple[str, Any], ...]
+Span = tuple[str, int, int | None]
+"""(code, start_ns, end_ns or None while open)."""
 
 
 @dataclass(slots=True)
@@ -41,6 +44,10 @@ class _Tally:
     """Confirmations per code."""
     chattering: set[str] = field(default_factory=set)
     stale: set[str] = field(default_factory=set)
+    top: int | None = None
+    """Confirmations of the top codes, when the store counted them (else from by_code)."""
+    chattering_count: int | None = None
+    stale_count: int | None = None
 
     def empty(self) -> bool:
         return not (any(self.counts) or self.active_ns or self.repairs or self.chattering
@@ -141,79 +148,101 @@ def _sortable(key: GroupKey) -> tuple[tuple[str, str], ...]:
 
 
 @dataclass(frozen=True, slots=True)
-class MinuteInputs:
-    """What ``from_minutes`` needs besides the minute sums."""
+class PeriodSums:
+    """What ``from_sums`` needs: figures already added up per period by the store."""
 
-    minutes: Sequence[Sequence[int]]
-    """(minute, failed, passed, activation, occurrence, confirmation, heal, clear, starts,
-    start_offset_ns, ends, end_offset_ns, repair_ns), minute ascending."""
+    sums: Sequence[Sequence[int]]
+    """Per period: i, the seven counts, starts, Σ starts·minute, Σ start offsets, ends,
+    Σ ends·minute, Σ end offsets, Σ repair ns (periods without minutes may be missing)."""
+    busy_windows: Sequence[tuple[int, int, int]]
+    """(period i, 10-minute window, confirmations) of windows in flood."""
+    top_confirmations: Mapping[int, int]
+    chattering: Mapping[int, int]
     closed_open_at_start: int
     """Ended episodes that were CONFIRMED at the first period's start."""
-    open_episodes: Sequence[Episode]
-    long_episodes: Sequence[Episode]
-    chatter: Sequence[tuple[int, str]]
-    confirmations: Sequence[tuple[int, str]]
+    open_spans: Sequence[Span]
+    long_spans: Sequence[Span]
+    """Ended episodes of 24 h or more that may be stale in the range."""
 
 
-def from_minutes(periods: Sequence[Period], data: MinuteInputs, as_of_ns: int) -> list[StatsRow]:
-    """Rows over all codes from per-minute sums; every period edge must be a whole minute.
+def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> list[StatsRow]:
+    """Rows over all codes from per-period sums of the per-minute table.
 
-    Active time per period [A, B) is Σ ends − Σ starts + B·open(B) − A·open(A), where the
-    sums run over episode edges inside the period (docs/statistics.md).
+    Active time per period [A, B) is Σ ends − Σ starts + B·open(B) − A·open(A), the sums
+    running over the episode edges inside the period (docs/statistics.md).
     """
-    bounds = _Bounds(periods)
     if not periods:
         return []
+    bounds = _Bounds(periods)
     tallies = [_Tally() for _ in periods]
-    edge_sums = [[0, 0, 0, 0] for _ in periods]  # starts, Σstart, ends, Σend
-    minute_starts = [s // NS_PER_MINUTE for s in bounds.starts]
-    for row in data.minutes:
-        minute = row[0]
-        i = bisect_right(minute_starts, minute) - 1
-        if i < 0 or minute * NS_PER_MINUTE >= bounds.ends[i]:
-            continue
+    edges = [[0, 0, 0, 0] for _ in periods]  # starts, Σ start ns, ends, Σ end ns
+    for row in data.sums:
+        i = row[0]
         tally = tallies[i]
-        counts = row[1:8]
-        tally.counts = [a + b for a, b in zip(tally.counts, counts, strict=True)]
-        if counts[4]:
-            tally.windows[minute * NS_PER_MINUTE // FLOOD_WINDOW_NS] += counts[4]
-        base = minute * NS_PER_MINUTE
-        sums = edge_sums[i]
-        sums[0] += row[8]
-        sums[1] += row[8] * base + row[9]
-        sums[2] += row[10]
-        sums[3] += row[10] * base + row[11]
-        tally.repairs += row[10]
-        tally.repair_ns += row[12]
+        tally.counts = list(row[1:8])
+        starts, start_minutes, start_offsets, ends, end_minutes, end_offsets = row[8:14]
+        edges[i] = [starts, start_minutes * NS_PER_MINUTE + start_offsets,
+                    ends, end_minutes * NS_PER_MINUTE + end_offsets]
+        tally.repairs = ends
+        tally.repair_ns = row[14]
     first = bounds.starts[0]
     open_now = data.closed_open_at_start
-    for episode in data.open_episodes:
-        end = _episode_end(episode, as_of_ns)
-        if episode.start_ns < first <= end:
+    for _, start, _ in data.open_spans:
+        end = max(start, as_of_ns)
+        if start < first <= end:
             open_now += 1
         ending = bounds.index(end)
         if ending is not None:
-            edge_sums[ending][2] += 1
-            edge_sums[ending][3] += end
+            edges[ending][2] += 1
+            edges[ending][3] += end
     for i, tally in enumerate(tallies):
-        starts, start_sum, ends, end_sum = edge_sums[i]
+        starts, start_sum, ends, end_sum = edges[i]
         open_after = open_now + starts - ends
-        tally.active_ns = end_sum - start_sum + bounds.ends[i] * open_after - (
-            bounds.starts[i] * open_now)
+        tally.active_ns = (end_sum - start_sum + bounds.ends[i] * open_after
+                           - bounds.starts[i] * open_now)
         open_now = open_after
-    for at_ns, code in data.chatter:
-        j = bounds.index(at_ns)
-        if j is not None:
-            tallies[j].chattering.add(code)
-    for at_ns, code in data.confirmations:
-        j = bounds.index(at_ns)
-        if j is not None:
-            tallies[j].by_code[code] += 1
-    for episode in (*data.long_episodes, *data.open_episodes):
-        end = _episode_end(episode, as_of_ns)
-        for j, _ in bounds.overlaps(episode.start_ns + STALE_AFTER_NS, end):
-            tallies[j].stale.add(episode.code)
+        tally.top = data.top_confirmations.get(i, 0)
+        tally.chattering_count = data.chattering.get(i, 0)
+    for i, window, count in data.busy_windows:
+        tallies[i].windows[window] = count
+    stale = _stale_counts(bounds, (*data.long_spans, *data.open_spans), as_of_ns)
+    for tally, count in zip(tallies, stale, strict=True):
+        tally.stale_count = count
     return [_row(p, {}, tallies[i], bounds, i) for i, p in enumerate(periods)]
+
+
+def _stale_counts(bounds: _Bounds, spans: Iterable[Span], as_of_ns: int) -> list[int]:
+    """Distinct stale codes per period: each span's stale part becomes a run of period
+    indexes, a code's runs are merged, and a difference array counts them."""
+    runs: dict[str, list[tuple[int, int]]] = {}
+    for code, start, end in spans:
+        stale_from = start + STALE_AFTER_NS
+        stop = end if end is not None else max(start, as_of_ns)
+        if stale_from >= stop:
+            continue
+        first = max(0, bisect_right(bounds.starts, stale_from) - 1)
+        if bounds.ends[first] <= stale_from:
+            first += 1
+        last = bisect_left(bounds.starts, stop) - 1
+        if first <= last:
+            runs.setdefault(code, []).append((first, last))
+    delta = [0] * (len(bounds.starts) + 1)
+    for code_runs in runs.values():
+        code_runs.sort()
+        begin, finish = code_runs[0]
+        for run_begin, run_finish in code_runs[1:]:
+            if run_begin > finish:
+                delta[begin] += 1
+                delta[finish + 1] -= 1
+                begin = run_begin
+            finish = max(finish, run_finish)
+        delta[begin] += 1
+        delta[finish + 1] -= 1
+    counts, running = [], 0
+    for step in delta[:-1]:
+        running += step
+        counts.append(running)
+    return counts
 
 
 def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
@@ -230,7 +259,10 @@ def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
             flood_windows += 1
             flood_ns += (min(end, (window + 1) * FLOOD_WINDOW_NS)
                          - max(start, window * FLOOD_WINDOW_NS))
-    top = sum(count for _, count in tally.by_code.most_common(TOP))
+    top = tally.top if tally.top is not None else sum(
+        count for _, count in tally.by_code.most_common(TOP))
+    chattering = (tally.chattering_count if tally.chattering_count is not None
+                  else len(tally.chattering))
     return StatsRow(
         period=period,
         group=group,
@@ -243,7 +275,7 @@ def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
         flood_windows=flood_windows,
         flood_seconds=flood_ns / NS_PER_SECOND,
         flood_percent=100 * flood_ns / length_ns if length_ns > 0 else 0.0,
-        chattering_codes=len(tally.chattering),
-        stale_codes=len(tally.stale),
+        chattering_codes=chattering,
+        stale_codes=tally.stale_count if tally.stale_count is not None else len(tally.stale),
         top10_share=top / confirmations if confirmations else None,
     )

@@ -7,6 +7,8 @@ from collections.abc import Sequence
 from datetime import datetime, timedelta
 from fnmatch import fnmatchcase
 
+from sqlalchemy import Connection
+
 from faultledger.domain import stat_compute
 from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.periods import PERIOD_KINDS, parse_bound, periods
@@ -86,19 +88,7 @@ def compute(db: Database, query: StatsQuery) -> list[StatsRow]:
         return []
     with db.reading() as conn:
         if query.codes is None and not query.group_by and query.minute_aligned():
-            minute = 60 * NS_PER_SECOND
-            inputs = stat_compute.MinuteInputs(
-                minutes=stat_tables.minutes(conn, query.since_ns // minute,
-                                            query.until_ns // minute),
-                closed_open_at_start=stat_tables.closed_open_at(conn, query.since_ns),
-                open_episodes=stat_tables.open_episodes(conn),
-                long_episodes=stat_tables.long_episodes(conn, query.since_ns, query.until_ns,
-                                                        stat_compute.STALE_AFTER_NS),
-                chatter=stat_tables.flagged(conn, "chatter", query.since_ns, query.until_ns),
-                confirmations=stat_tables.flagged(conn, "confirmation", query.since_ns,
-                                                  query.until_ns),
-            )
-            return stat_compute.from_minutes(query.periods, inputs, query.as_of_ns)
+            return stat_compute.from_sums(query.periods, _sums(conn, query), query.as_of_ns)
         only = None
         if query.codes is not None:
             only = [code for code in stat_tables.codes(conn) if query.selects(code)]
@@ -106,3 +96,20 @@ def compute(db: Database, query: StatsQuery) -> list[StatsRow]:
         episodes = stat_tables.episodes(conn, query.since_ns, query.until_ns, only)
     return stat_compute.from_facts(query.periods, facts, episodes, query.as_of_ns,
                                    query.group_by)
+
+
+def _sums(conn: Connection, query: StatsQuery) -> stat_compute.PeriodSums:
+    minute = 60 * NS_PER_SECOND
+    edges = [(to_ns(p.start), to_ns(p.end)) for p in query.periods]
+    minutes = [(a // minute, b // minute) for a, b in edges]
+    return stat_compute.PeriodSums(
+        sums=stat_tables.period_sums(conn, minutes),
+        busy_windows=stat_tables.busy_windows(
+            conn, minutes, stat_compute.FLOOD_WINDOW_NS // minute, stat_compute.FLOOD_ABOVE),
+        top_confirmations=stat_tables.top_confirmations(conn, edges, stat_compute.TOP),
+        chattering=stat_tables.chattering(conn, edges),
+        closed_open_at_start=stat_tables.closed_open_at(conn, query.since_ns),
+        open_spans=stat_tables.open_spans(conn),
+        long_spans=stat_tables.long_spans(conn, query.since_ns, query.until_ns,
+                                          stat_compute.STALE_AFTER_NS),
+    )

@@ -101,10 +101,11 @@ stat_facts = Table(
 )
 Index("ix_stat_facts_at", stat_facts.c.at_ns)
 Index("ix_stat_facts_code_at", stat_facts.c.fault_code, stat_facts.c.at_ns)
-Index("ix_stat_facts_confirmation_at", stat_facts.c.at_ns,
+# Covering (time, code) for the per-period top-10 and chattering counts.
+Index("ix_stat_facts_confirmation_at", stat_facts.c.at_ns, stat_facts.c.fault_code,
       sqlite_where=stat_facts.c.confirmation == 1,
       postgresql_where=stat_facts.c.confirmation == 1)
-Index("ix_stat_facts_chatter_at", stat_facts.c.at_ns,
+Index("ix_stat_facts_chatter_at", stat_facts.c.at_ns, stat_facts.c.fault_code,
       sqlite_where=stat_facts.c.chatter == 1, postgresql_where=stat_facts.c.chatter == 1)
 
 stat_episodes = Table(

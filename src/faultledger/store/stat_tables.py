@@ -4,9 +4,21 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
-from sqlalchemy import Connection, and_, delete, func, or_, select
+from sqlalchemy import (
+    BigInteger,
+    Connection,
+    Integer,
+    and_,
+    column,
+    delete,
+    func,
+    literal_column,
+    or_,
+    select,
+    values,
+)
 
 from faultledger.domain.statistics import CodeTrack, Episode, StatFact, StatsOutput
 from faultledger.store import fastpath
@@ -129,28 +141,79 @@ def load_tracks(conn: Connection) -> dict[str, CodeTrack]:
 
 
 # -- reads -------------------------------------------------------------------------------------
-class MinuteSums(NamedTuple):
-    minute: int
-    failed: int
-    passed: int
-    activation: int
-    occurrence: int
-    confirmation: int
-    heal: int
-    clear: int
-    starts: int
-    start_offset_ns: int
-    ends: int
-    end_offset_ns: int
-    repair_ns: int
+def _periods(edges: Sequence[tuple[int, int]], unit: str) -> Any:
+    """The periods as a VALUES table p(i, a, b) to join against (bounds in ``unit``)."""
+    return values(column("i", Integer), column("a", BigInteger), column("b", BigInteger),
+                  name=f"p_{unit}").data([(i, a, b) for i, (a, b) in enumerate(edges)]).cte()
 
 
-def minutes(conn: Connection, first: int, last: int) -> list[MinuteSums]:
-    """Per-minute sums for minutes [first, last)."""
-    query = (select(stat_minutes)
-             .where(stat_minutes.c.minute >= first, stat_minutes.c.minute < last)
-             .order_by(stat_minutes.c.minute))
-    return [MinuteSums(*row) for row in conn.execute(query)]
+def period_sums(conn: Connection, minute_edges: Sequence[tuple[int, int]]) -> list[tuple[int, ...]]:
+    """Per period i (bounds in whole minutes): i, the seven counts, starts, Σ starts·minute,
+    Σ start offsets, ends, Σ ends·minute, Σ end offsets, Σ repair ns."""
+    p = _periods(minute_edges, "minute")
+    m = stat_minutes.c
+    query = (
+        select(p.c.i, *(func.sum(m[flag]) for flag in _FLAGS),
+               func.sum(m.starts), func.sum(m.starts * m.minute), func.sum(m.start_offset_ns),
+               func.sum(m.ends), func.sum(m.ends * m.minute), func.sum(m.end_offset_ns),
+               func.sum(m.repair_ns))
+        .select_from(p.join(stat_minutes, and_(m.minute >= p.c.a, m.minute < p.c.b)))
+        .group_by(p.c.i)
+    )
+    return [tuple(int(v or 0) for v in row) for row in conn.execute(query)]
+
+
+def busy_windows(conn: Connection, minute_edges: Sequence[tuple[int, int]], minutes: int,
+                 above: int) -> list[tuple[int, int, int]]:
+    """(period i, window, confirmations) of grid windows of ``minutes`` with more than
+    ``above`` confirmations inside period i."""
+    p = _periods(minute_edges, "minute")
+    m = stat_minutes.c
+    window = (m.minute // minutes).label("w")
+    total = func.sum(m.confirmation)
+    query = (
+        select(p.c.i, window, total)
+        .select_from(p.join(stat_minutes, and_(m.minute >= p.c.a, m.minute < p.c.b)))
+        .where(m.confirmation > 0)
+        .group_by(p.c.i, window)
+        .having(total > above)
+    )
+    return [(int(i), int(w), int(n)) for i, w, n in conn.execute(query)]
+
+
+def top_confirmations(conn: Connection, edges: Sequence[tuple[int, int]],
+                      top: int) -> dict[int, int]:
+    """Per period i (bounds in ns): confirmations of its ``top`` most confirmed codes."""
+    p = _periods(edges, "ns")
+    f = stat_facts.c
+    per_code = (
+        select(p.c.i.label("i"), func.count().label("n"))
+        .select_from(p.join(stat_facts, and_(f.confirmation == 1, f.at_ns >= p.c.a,
+                                             f.at_ns < p.c.b)))
+        .group_by(p.c.i, f.fault_code)
+        .subquery()
+    )
+    ranked = select(
+        per_code.c.i, per_code.c.n,
+        func.row_number().over(partition_by=per_code.c.i, order_by=per_code.c.n.desc())
+        .label("rank"),
+    ).subquery()
+    query = (select(ranked.c.i, func.sum(ranked.c.n)).where(ranked.c.rank <= top)
+             .group_by(ranked.c.i))
+    return {int(i): int(n) for i, n in conn.execute(query)}
+
+
+def chattering(conn: Connection, edges: Sequence[tuple[int, int]]) -> dict[int, int]:
+    """Per period i (bounds in ns): distinct codes with a chattering activation."""
+    p = _periods(edges, "ns")
+    f = stat_facts.c
+    query = (
+        select(p.c.i, func.count(f.fault_code.distinct()))
+        .select_from(p.join(stat_facts, and_(f.chatter == 1, f.at_ns >= p.c.a,
+                                             f.at_ns < p.c.b)))
+        .group_by(p.c.i)
+    )
+    return {int(i): int(n) for i, n in conn.execute(query)}
 
 
 def closed_open_at(conn: Connection, at_ns: int) -> int:
@@ -160,28 +223,26 @@ def closed_open_at(conn: Connection, at_ns: int) -> int:
     return int(conn.execute(query).scalar_one())
 
 
-def open_episodes(conn: Connection) -> list[Episode]:
-    query = select(stat_episodes).where(stat_episodes.c.end_ns.is_(None))
-    return [_episode(row) for row in conn.execute(query)]
+Span = tuple[str, int, int | None]
+"""(code, start_ns, end_ns or None while open): what staleness and open time need."""
 
 
-def long_episodes(conn: Connection, since_ns: int, until_ns: int, min_ns: int) -> list[Episode]:
+def open_spans(conn: Connection) -> list[Span]:
+    query = select(stat_episodes.c.fault_code, stat_episodes.c.start_ns,
+                   stat_episodes.c.end_ns).where(stat_episodes.c.end_ns.is_(None))
+    return [(code, int(start), None) for code, start, _ in fastpath.fetch_all(conn, query)]
+
+
+def long_spans(conn: Connection, since_ns: int, until_ns: int, min_ns: int) -> list[Span]:
     """Ended episodes of at least ``min_ns`` that end after ``since_ns`` and start before
     ``until_ns - min_ns`` (the stale candidates; the partial index holds only long ones)."""
-    query = select(stat_episodes).where(
-        stat_episodes.c.end_ns - stat_episodes.c.start_ns >= min_ns,
-        stat_episodes.c.end_ns > since_ns,
-        stat_episodes.c.start_ns < until_ns - min_ns,
-    )
-    return [_episode(row) for row in conn.execute(query)]
-
-
-def flagged(conn: Connection, flag: str, since_ns: int, until_ns: int) -> list[tuple[int, str]]:
-    """(at_ns, code) of facts with ``flag`` (chatter, confirmation) in [since, until)."""
-    column = stat_facts.c[flag]
-    query = select(stat_facts.c.at_ns, stat_facts.c.fault_code).where(
-        column == 1, stat_facts.c.at_ns >= since_ns, stat_facts.c.at_ns < until_ns)
-    return [(int(at), code) for at, code in conn.execute(query)]
+    e = stat_episodes.c
+    # The length as a literal, so SQLite sees that the partial index's condition holds.
+    query = select(e.fault_code, e.start_ns, e.end_ns).where(
+        e.end_ns - e.start_ns >= literal_column(str(int(min_ns))), e.end_ns > since_ns,
+        e.start_ns < until_ns - min_ns)
+    return [(code, int(start), int(end)) for code, start, end in fastpath.fetch_all(
+        conn, query)]
 
 
 def codes(conn: Connection) -> list[str]:
@@ -222,3 +283,25 @@ def _chunks(only: Sequence[str] | None) -> Iterable[Sequence[str] | None]:
         return
     for start in range(0, len(only), _CODE_CHUNK):
         yield only[start:start + _CODE_CHUNK]
+
+
+def differences(conn: Connection, replayed: StatsOutput) -> list[str]:
+    """Which statistics tables differ from a full replay's output (for ``verify``)."""
+    problems: list[str] = []
+    stored_facts = [StatFact(*row) for row in conn.execute(
+        select(stat_facts).order_by(stat_facts.c.seq))]
+    if stored_facts != replayed.facts:
+        problems.append("stat_facts")
+    episodes = {e.start_seq: e for e in replayed.started}
+    episodes.update((e.start_seq, e) for e in replayed.ended)
+    stored_episodes = {row.start_seq: _episode(row) for row in conn.execute(select(stat_episodes))}
+    if stored_episodes != episodes:
+        problems.append("stat_episodes")
+    expected_minutes = {row["minute"]: row for row in _minute_rows(replayed)}
+    stored_minutes = {row["minute"]: dict(row) for row in conn.execute(
+        select(stat_minutes)).mappings()}
+    if stored_minutes != expected_minutes:
+        problems.append("stat_minutes")
+    if load_tracks(conn) != replayed.tracks:
+        problems.append("stat_codes")
+    return [f"{name} differs from a full replay of the log" for name in problems]
