@@ -14,7 +14,8 @@ from typing import Annotated, NoReturn
 
 import typer
 
-from faultledger.cli import render
+from faultledger.cli import audit, render
+from faultledger.cli import stats as stats_commands
 from faultledger.domain.clock import from_ns
 from faultledger.domain.types import FaultStatus, Severity
 from faultledger.errors import FaultLedgerError
@@ -188,32 +189,10 @@ def clear(
     typer.echo(result.message)
 
 
-@app.command()
-def history(
-    code: Annotated[str | None, typer.Option("--code", help="Only this fault code.")] = None,
-    source: Annotated[str | None, typer.Option("--source")] = None,
-    since: Annotated[str | None, typer.Option("--since", help="ISO 8601, inclusive.")] = None,
-    until: Annotated[str | None, typer.Option("--until", help="ISO 8601, exclusive.")] = None,
-    kind: Annotated[list[str] | None, typer.Option("--kind", help="Record kind (repeatable).")
-                    ] = None,
-    limit: Annotated[int | None, typer.Option("--limit", min=1)] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="JSON Lines, one record a line.")
-                       ] = False,
-    as_csv: Annotated[bool, typer.Option("--csv", help="CSV with a header row.")] = False,
-    db: DbOption = None,
-    config: ConfigOption = None,
-) -> None:
-    """The audit history: log records in seq order, with their hashes in JSON/CSV."""
-    with opened(db, config) as ledger:
-        records = ledger.history(code=code, since=parse_time(since, "--since"),
-                                 until=parse_time(until, "--until"), source=source,
-                                 kinds=kind or (), limit=limit)
-    if as_json:
-        sys.stdout.write(render.to_json_lines(render.record_dict(r) for r in records))
-    elif as_csv:
-        sys.stdout.write(render.records_csv(records))
-    else:
-        render.console().print(render.history_table(records))
+# history, verify and state-at: the audit commands, in cli/audit.py.
+audit.register(app)
+# stats and report-shift, in cli/stats.py.
+stats_commands.register(app)
 
 
 @app.command()
@@ -223,29 +202,6 @@ def rebuild(db: DbOption = None, config: ConfigOption = None) -> None:
         count = ledger.rebuild()
         faults = len(ledger.all_faults())
     typer.echo(f"rebuilt projections from {count} records: {faults} faults")
-
-
-@app.command()
-def verify(as_json: JsonOption = False, db: DbOption = None, config: ConfigOption = None
-           ) -> None:
-    """Check the hash chain and that the projections equal a full replay."""
-    with opened(db, config) as ledger:
-        report_ = ledger.verify()
-    if as_json:
-        typer.echo(json.dumps({
-            "ok": report_.ok, "records": report_.records, "head_seq": report_.head_seq,
-            "head_hash": report_.head_hash, "first_bad_seq": report_.first_bad_seq,
-            "problems": report_.problems}, indent=2))
-    elif report_.ok:
-        typer.echo(f"OK: {report_.records} records, chain intact, projections equal a full "
-                   f"replay; head seq {report_.head_seq} hash {report_.head_hash}")
-    else:
-        for problem in report_.problems:
-            render.complain("FAILED:", problem)
-        if report_.first_bad_seq is not None:
-            typer.echo(f"first bad seq: {report_.first_bad_seq}")
-    if not report_.ok:
-        raise typer.Exit(1)
 
 
 @db_app.command("upgrade")

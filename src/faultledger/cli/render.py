@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import csv
-import io
-import json
 from collections.abc import Iterable
 from datetime import UTC, datetime
 from typing import Any
@@ -60,19 +57,6 @@ def fault_dict(fault: Fault) -> dict[str, Any]:
     }
 
 
-def record_dict(record: LogRecord) -> dict[str, Any]:
-    return {
-        "seq": record.seq,
-        "event_id": record.event_id,
-        "kind": record.kind,
-        "fault_code": record.fault_code,
-        "source_id": record.source_id,
-        "occurred_at": when(record.occurred_at),
-        "recorded_at": when(record.recorded_at),
-        "schema_version": record.schema_version,
-        "payload": record.payload,
-        "hash": record.hash,
-    }
 
 
 def faults_table(faults: Iterable[Fault], title: str) -> Table:
@@ -126,21 +110,8 @@ def transitions_table(items: Iterable[Transition]) -> Table:
     return table
 
 
-def to_json_lines(items: Iterable[dict[str, Any]]) -> str:
-    return "".join(json.dumps(item, ensure_ascii=False) + "\n" for item in items)
 
 
-def records_csv(records: Iterable[LogRecord]) -> str:
-    out = io.StringIO()
-    columns = ["seq", "event_id", "kind", "fault_code", "source_id", "occurred_at",
-               "recorded_at", "schema_version", "payload", "hash"]
-    writer = csv.DictWriter(out, fieldnames=columns, lineterminator="\n")
-    writer.writeheader()
-    for record in records:
-        row = record_dict(record)
-        row["payload"] = canonical_json(row["payload"])
-        writer.writerow(row)
-    return out.getvalue()
 
 
 def describe_url(url: str) -> str:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from faultledger_msgs.srv import GetHistory, ReportFaultOnce
+from faultledger_msgs.srv import GetHistory, GetStatistics, ReportFaultOnce
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.service import Service
@@ -78,6 +78,7 @@ class FaultManagerNode:
             (ClearFault, "~/clear_fault", self.clear_fault),
             (ListFaultsForEntity, "~/list_faults_for_entity", self.list_faults_for_entity),
             (GetHistory, "~/get_history", self.get_history),
+            (GetStatistics, "~/get_statistics", self.get_statistics),
         ]
         self.services = [self.report_service, self.report_once_service, *(
             node.create_service(kind, name, callback, qos_profile=SERVICE_QOS)
@@ -168,6 +169,23 @@ class FaultManagerNode:
             return response
         response.success = True
         response.records = [convert.record_msg(r) for r in records]
+        return response
+
+    def get_statistics(self, request: Any, response: Any) -> Any:
+        """``FaultLedger.stats`` in the ledger's calendar; refused input → success=false."""
+        try:
+            rows = self.ledger.stats(
+                by=request.by or "shift",
+                since=convert.stats_bound(request.since, request.since_time, "since"),
+                until=convert.stats_bound(request.until, request.until_time, "until"),
+                codes=list(request.codes) or None, group_by=list(request.group_by),
+                as_of=convert.stats_moment(request.as_of, "as_of"))
+        except FaultLedgerError as error:
+            response.success = False
+            response.message = str(error)
+            return response
+        response.success = True
+        response.rows = [convert.stats_row_msg(row) for row in rows]
         return response
 
     def close(self) -> None:

@@ -14,7 +14,7 @@ from rclpy.utilities import ok, try_shutdown
 
 from faultledger.ros.bridges.runner import RunningBridge, settings_from, start_bridge
 from faultledger.ros.node import NODE_NAME, FaultManagerNode, declare_policy
-from faultledger.service.config import Settings
+from faultledger.service.config import Settings, load_shift_calendar
 from faultledger.service.ledger import FaultLedger
 from faultledger.store.database import describe
 
@@ -37,6 +37,8 @@ def spin_until(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
 
 def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
     """Serve until a signal; the database URL is --db, else ``database_path``, else config."""
+    # Before ROS starts: a bad shift calendar stops the manager with the file's message.
+    calendar = None if settings.shifts is None else load_shift_calendar(settings.shifts)
     rclpy.init(args=["faultledger", *ros_args],
                signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
@@ -56,7 +58,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
         policy = declare_policy(node, settings.policy)
         path = str(node.get_parameter("database_path").value or "")
         url = db_url or (f"sqlite:///{path}" if path else settings.database.url)
-        ledger = FaultLedger.open(url, policy=policy, max_batch=settings.database.max_batch)
+        ledger = FaultLedger.open(url, policy=policy, max_batch=settings.database.max_batch,
+                                  calendar=calendar)
         manager = FaultManagerNode(node, ledger)
         executor.add_node(node)
         for name, entry in settings.bridges.items():

@@ -32,6 +32,9 @@ class Settings(BaseModel):
     bridges: dict[str, dict[str, Any]] = Field(default_factory=dict)
     """Bridges `faultledger serve` runs: name → {enabled, config: FILE, inline settings}.
     Validated by the ROS adapter when it starts them (the core does not import ROS)."""
+    shifts: Path | None = None
+    """Shift calendar YAML (see config/shifts.yaml) for statistics, relative to the working
+    directory; None: the built-in default calendar (UTC, three 8-hour shifts)."""
 
 
 def load_settings(path: Path | None) -> Settings:

@@ -6,7 +6,7 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from types import TracebackType
@@ -14,8 +14,8 @@ from types import TracebackType
 from sqlalchemy import Connection
 
 from faultledger.domain import queries, validation
-from faultledger.domain.clock import to_ns
-from faultledger.domain.events import FaultCleared, FaultReported, LogRecord
+from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
+from faultledger.domain.events import KINDS, FaultCleared, FaultReported, LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.notifications import Notification
 from faultledger.domain.periods import default_calendar
@@ -29,6 +29,7 @@ from faultledger.service import statistics
 from faultledger.service.requests import ReportRequest
 from faultledger.service.results import (
     ClearResult,
+    Downtime,
     EntityLookup,
     FaultLookup,
     ReportResult,
@@ -247,17 +248,19 @@ class FaultLedger:
 
     def history(self, code: str | None = None, since: datetime | int | None = None,
                 until: datetime | int | None = None, source: str | None = None,
-                kinds: Iterable[str] = (), limit: int | None = None) -> list[LogRecord]:
+                kinds: Iterable[str] = (), limit: int | None = None, *,
+                codes: Sequence[str] | None = None, from_seq: int | None = None,
+                to_seq: int | None = None) -> list[LogRecord]:
         """Log records in seq order; ``since``/``until`` bound ``occurred_at`` as [since, until).
 
         A bound may be an int of nanoseconds since the epoch: a datetime holds only
-        microseconds, and ROS stamps carry nanoseconds.
+        microseconds, and ROS stamps carry nanoseconds. ``code`` is one exact code; ``codes``
+        are exact codes or case-sensitive fnmatch globs (``HW_*_EMERGENCY_STOP``), any of which
+        matches; ``from_seq``/``to_seq`` are inclusive. An unknown kind or a bad seq range
+        raises InvalidInputError rather than answering nothing. For exports of any size,
+        ``export_history`` streams the same selection as stored rows.
         """
-        where = event_log.RecordFilter(
-            fault_code=code, source_id=source,
-            since_ns=_instant_ns(since), until_ns=_instant_ns(until),
-            kinds=tuple(kinds), limit=limit,
-        )
+        where = _record_filter(code, since, until, source, kinds, limit, codes, from_seq, to_seq)
         with self._db.reading() as conn:
             return event_log.find(conn, where)
 
@@ -274,6 +277,36 @@ class FaultLedger:
                                       calendar or self.calendar, as_of)
         return statistics.compute(self._db, query)
 
+    def downtimes(self, since: datetime, until: datetime, limit: int | None = None, *,
+                  as_of: datetime | None = None) -> list[Downtime]:
+        """The CONFIRMED episodes overlapping [since, until), most time inside the range
+        first (then the longest, then the earliest).
+
+        An episode still open ends at ``as_of`` (default now), as in ``stats``; episodes
+        with no time inside the range (0 s, or starting after ``as_of``) are left out.
+        """
+        try:
+            since_ns, until_ns = to_ns(since), to_ns(until)
+            as_of_ns = time.time_ns() if as_of is None else to_ns(as_of)
+        except (ValueError, TypeError, AttributeError):
+            raise InvalidInputError("since, until and as_of must be timezone-aware datetimes"
+                                    ) from None
+        if since_ns >= until_ns:
+            raise InvalidInputError("since must be before until")
+        with self._db.reading() as conn:
+            episodes = stat_tables.episodes(conn, since_ns, until_ns, None)
+        found: list[Downtime] = []
+        for e in episodes:
+            end_ns = e.end_ns if e.end_ns is not None else max(e.start_ns, as_of_ns)
+            inside = min(end_ns, until_ns) - max(e.start_ns, since_ns)
+            if inside > 0:
+                found.append(Downtime(
+                    e.code, e.source, e.severity, from_ns(e.start_ns),
+                    None if e.end_ns is None else from_ns(e.end_ns),
+                    (end_ns - e.start_ns) / NS_PER_SECOND, inside / NS_PER_SECOND))
+        found.sort(key=lambda d: (-d.seconds_in_range, -d.seconds, d.start, d.fault_code))
+        return found if limit is None else found[:limit]
+
     def transitions(self, code: str | None = None) -> list[Transition]:
         with self._db.reading() as conn:
             return projections.load_transitions(conn, code)
@@ -287,8 +320,16 @@ class FaultLedger:
             projector.apply_all(event_log.read(conn, upto_seq=upto))
         return sorted(projector.committed(), key=lambda f: f.fault_code)
 
-    def verify(self) -> VerifyReport:
-        """Hash chain intact, head anchored, persisted projections equal to a full replay."""
+    def verify(self, from_seq: int | None = None, to_seq: int | None = None) -> VerifyReport:
+        """Hash chain intact, head anchored, persisted projections equal to a full replay.
+
+        With ``from_seq``/``to_seq`` (inclusive) only that segment of the chain is checked,
+        starting from the stored hash of record ``from_seq - 1``: whoever trusts that one hash
+        (anchored elsewhere, or covered by an earlier check) needs nothing before it. The
+        checkpoint is compared when the segment holds its seq; projections are not replayed.
+        """
+        if from_seq is not None or to_seq is not None:
+            return _verify_segment(self._db, 1 if from_seq is None else from_seq, to_seq)
         with self._db.reading() as conn:
             chain = event_log.check_chain(conn)
             checkpoint = projections.load_checkpoint(conn)
@@ -455,14 +496,15 @@ def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -
             problems.append(f"projection of fault {code} differs from a full replay of the log")
     if projections.load_transitions(conn) != expected_transitions:
         problems.append("transitions table differs from a full replay of the log")
+    if stat_tables.checkpoint_seq(conn) == checkpoint.seq:
+        problems.extend(stat_tables.differences(conn, _stats(expected).take()))
+    else:
+        problems.append(f"statistics include seq {stat_tables.checkpoint_seq(conn)}, the "
+                        f"projections {checkpoint.seq}")
     if checkpoint.policy_seq != expected.policy_seq:
         problems.append(f"checkpoint names record {checkpoint.policy_seq} as the policy in force, "
                         f"a replay finds {expected.policy_seq}")
     return problems
-
-
-def _instant_ns(moment: datetime | int | None) -> int | None:
-    return moment if moment is None or isinstance(moment, int) else to_ns(moment)
 
 
 def _report_command(request: ReportRequest) -> Report | ReportResult:
@@ -483,3 +525,132 @@ def _report_command(request: ReportRequest) -> Report | ReportResult:
                           request.source_id)
     return Report(event, occurred_ns, request.event_id or str(uuid.uuid4()),
                   request.event_id is not None)
+
+
+# -- audit: filtered and streamed history, verification of a segment, prefixes by time -------
+def export_history(ledger: FaultLedger, code: str | None = None,
+                   since: datetime | int | None = None, until: datetime | int | None = None,
+                   source: str | None = None, kinds: Iterable[str] = (),
+                   limit: int | None = None, *, codes: Sequence[str] | None = None,
+                   from_seq: int | None = None, to_seq: int | None = None
+                   ) -> Iterator[event_log.StoredRecord]:
+    """``history``'s selection as stored rows with their predecessor's hash, streamed.
+
+    For exports of any size: rows are fetched in chunks inside one read transaction while the
+    caller consumes them (a consistent snapshot). The filter is checked here, before the
+    first row, so bad input fails before anything is written.
+    """
+    where = _record_filter(code, since, until, source, kinds, limit, codes, from_seq, to_seq)
+    return _stored_rows(ledger._db, where)
+
+
+def _stored_rows(db: Database, where: event_log.RecordFilter
+                 ) -> Iterator[event_log.StoredRecord]:
+    with db.reading() as conn:
+        yield from event_log.iter_stored(conn, where)
+
+
+def seq_recorded_by(ledger: FaultLedger, when: datetime | int) -> int:
+    """The last seq of the log prefix ``state_at(when)`` replays, so it can be named and
+    verified: a seq is checked against the log, a time maps to the records recorded by it."""
+    with ledger._db.reading() as conn:
+        if isinstance(when, int):
+            head_seq = event_log.head(conn)[0]
+            if not 0 <= when <= head_seq:
+                raise InvalidInputError(f"seq {when} is not in the log (seq 0..{head_seq})")
+            return when
+        return event_log.last_seq_recorded_by(conn, _aware_ns(when, "when"))
+
+
+def seqs_recorded_between(ledger: FaultLedger, since: datetime | None,
+                          until: datetime | None) -> tuple[int, int | None]:
+    """Inclusive seq range of the records recorded in [since, until]: a contiguous segment
+    that ``verify`` can check (``occurred_at`` is the reporter's and not in seq order).
+
+    ``until`` ends where ``state_at(until)``'s prefix ends; None means up to the head.
+    """
+    with ledger._db.reading() as conn:
+        start = 1 if since is None else event_log.last_seq_recorded_by(
+            conn, _aware_ns(since, "since") - 1) + 1
+        end = None if until is None else event_log.last_seq_recorded_by(
+            conn, _aware_ns(until, "until"))
+        head_seq = event_log.head(conn)[0]
+    if start > (head_seq if end is None else end):
+        window = " and ".join(f"{name} {moment.isoformat()}" for name, moment
+                              in (("since", since), ("until", until)) if moment is not None)
+        raise InvalidInputError(f"no record of the log (seq 1..{head_seq}) was recorded within "
+                                f"{window}")
+    return start, end
+
+
+def _verify_segment(db: Database, from_seq: int, to_seq: int | None) -> VerifyReport:
+    """``verify`` over [from_seq, to_seq]: the chain segment and the checkpoint inside it."""
+    _check_seq_range(from_seq, to_seq)
+    with db.reading() as conn:
+        chain = event_log.check_chain(conn, from_seq, to_seq)
+        problems = [chain.problem] if chain.problem else []
+        first_bad = chain.first_bad_seq
+        if chain.problem is None:
+            found = _checkpoint_problem(conn, from_seq, to_seq, chain)
+            if found is not None:
+                first_bad = found[0]
+                problems.append(found[1])
+    return VerifyReport(not problems, chain.records, chain.head_seq, chain.head_hash, first_bad,
+                        problems)
+
+
+def _checkpoint_problem(conn: Connection, from_seq: int, to_seq: int | None,
+                        chain: event_log.ChainCheck) -> tuple[int, str] | None:
+    """The checkpoint names (seq, hash) of a record: it must exist and match when the verified
+    segment is open-ended or holds that seq (catches a rewritten head with a fresh hash)."""
+    checkpoint = projections.load_checkpoint(conn)
+    if to_seq is None and checkpoint.seq > chain.head_seq:
+        return chain.head_seq + 1, (
+            f"the log ends at seq {chain.head_seq} but the projections include seq "
+            f"{checkpoint.seq}: records {chain.head_seq + 1}..{checkpoint.seq} were deleted")
+    if (from_seq <= checkpoint.seq <= chain.head_seq
+            and event_log.hash_at(conn, checkpoint.seq) != checkpoint.hash):
+        return checkpoint.seq, f"record {checkpoint.seq} differs from the recorded head"
+    return None
+
+
+def _record_filter(code: str | None, since: datetime | int | None, until: datetime | int | None,
+                   source: str | None, kinds: Iterable[str], limit: int | None,
+                   codes: Sequence[str] | None, from_seq: int | None, to_seq: int | None
+                   ) -> event_log.RecordFilter:
+    """A checked history filter: bad input is an InvalidInputError naming it, never a silently
+    empty answer (a misspelt kind would otherwise look like "nothing happened")."""
+    wanted = (kinds,) if isinstance(kinds, str) else tuple(kinds)
+    unknown = [kind for kind in wanted if kind not in KINDS]
+    if unknown:
+        raise InvalidInputError(f"unknown record kind {', '.join(map(repr, unknown))}; valid "
+                                f"kinds: {', '.join(KINDS)}")
+    patterns = (codes,) if isinstance(codes, str) else tuple(codes or ())
+    _check_seq_range(from_seq, to_seq)
+    return event_log.RecordFilter(
+        fault_code=code, source_id=source, since_ns=_bound_ns(since, "since"),
+        until_ns=_bound_ns(until, "until"), kinds=wanted, limit=limit, codes=patterns,
+        from_seq=from_seq, to_seq=to_seq,
+    )
+
+
+def _check_seq_range(from_seq: int | None, to_seq: int | None) -> None:
+    for name, value in (("from_seq", from_seq), ("to_seq", to_seq)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or value < 1):
+            raise InvalidInputError(f"{name} must be a seq number of 1 or more, got {value!r}")
+    if from_seq is not None and to_seq is not None and from_seq > to_seq:
+        raise InvalidInputError(f"from_seq {from_seq} is after to_seq {to_seq}: the range is "
+                                "empty")
+
+
+def _bound_ns(moment: datetime | int | None, name: str) -> int | None:
+    return moment if moment is None or isinstance(moment, int) else _aware_ns(moment, name)
+
+
+def _aware_ns(moment: datetime, name: str) -> int:
+    try:
+        return to_ns(moment)
+    except (ValueError, TypeError, AttributeError):
+        raise InvalidInputError(f"{name} must be a timezone-aware datetime, got "
+                                f"{moment!r}") from None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from datetime import datetime
 
 from faultledger.domain.fault import Fault
 
@@ -47,3 +48,20 @@ class VerifyReport:
     head_hash: str
     first_bad_seq: int | None = None
     problems: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
+class Downtime:
+    """One CONFIRMED episode overlapping a range (``FaultLedger.downtimes``)."""
+
+    fault_code: str
+    source_id: str
+    """Source of the fact that confirmed it."""
+    severity: int
+    start: datetime
+    end: datetime | None
+    """None: still CONFIRMED at ``as_of``."""
+    seconds: float
+    """Whole episode; an open one counts up to ``as_of``."""
+    seconds_in_range: float
+    """The part inside the range."""

@@ -19,8 +19,9 @@ from faultledger.store import stat_tables
 from faultledger.store.database import Database
 
 DEFAULT_SPAN = timedelta(hours=24)
-MAX_PERIODS = 200_000
-"""Refuse ranges that would cut into more periods than anyone can read (10 min × 3.8 years)."""
+MAX_PERIODS = 60_000
+"""Refuse ranges cut into more periods than that (a year of 10-minute slots, ~3 s): a
+bigger answer helps nobody and would hold up a serving process."""
 
 
 class StatsQuery:

@@ -5,9 +5,10 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any
+from fnmatch import fnmatchcase
+from typing import Any, NamedTuple
 
-from sqlalchemy import Connection, Integer, bindparam, func, select
+from sqlalchemy import Connection, Integer, Select, bindparam, func, select
 
 from faultledger.domain.events import LogRecord, PolicyChanged, UnknownRecordError, decode
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
@@ -95,32 +96,179 @@ def read(conn: Connection, after_seq: int = 0, upto_seq: int | None = None) -> I
         yield _to_record(row)
 
 
+GLOB_CHARACTERS = "*?["
+"""A code pattern holding one of these is an fnmatch glob; any other is an exact code."""
+
+
+def is_glob(pattern: str) -> bool:
+    return any(char in pattern for char in GLOB_CHARACTERS)
+
+
 @dataclass(frozen=True, slots=True)
 class RecordFilter:
+    """What ``find`` selects; every given condition must hold.
+
+    ``codes`` are exact codes or case-sensitive fnmatch globs (any of them matches);
+    ``from_seq``/``to_seq`` are inclusive, ``since_ns``/``until_ns`` bound ``occurred_at``
+    as [since, until).
+    """
+
     fault_code: str | None = None
     source_id: str | None = None
     since_ns: int | None = None
     until_ns: int | None = None
     kinds: tuple[str, ...] = ()
     limit: int | None = None
+    codes: tuple[str, ...] = ()
+    from_seq: int | None = None
+    to_seq: int | None = None
 
 
 def find(conn: Connection, where: RecordFilter) -> list[LogRecord]:
     """Records matching every given filter; times compare with ``occurred_at`` in [since, until)."""
-    query = select(events).order_by(events.c.seq)
+    return list(iter_find(conn, where))
+
+
+def iter_find(conn: Connection, where: RecordFilter) -> Iterator[LogRecord]:
+    """``find`` streamed: one statement whose rows are fetched in chunks as they are used."""
+    query = _filtered(conn, select(events), where)
+    if query is not None:
+        for row in _stream(conn, query):
+            yield _to_record(row)
+
+
+class StoredRecord(NamedTuple):
+    """A record exactly as stored, with the hash of the record before it.
+
+    ``payload_json`` is the stored canonical text (not an upcast of it): with ``prev_hash`` it
+    is all ``record_hash`` needs, so an export can be checked without the database.
+    ``prev_hash`` is None when record ``seq - 1`` is missing.
+    """
+
+    seq: int
+    event_id: str
+    kind: str
+    fault_code: str | None
+    source_id: str | None
+    payload_json: str
+    occurred_at_ns: int
+    recorded_at_ns: int
+    schema_version: int
+    hash: str
+    prev_hash: str | None
+
+
+_PREVIOUS = events.alias("previous")
+
+
+def iter_stored(conn: Connection, where: RecordFilter) -> Iterator[StoredRecord]:
+    """Rows matching ``where`` as stored (no decoding), each joined with its predecessor's hash."""
+    base = (select(*events.c, _PREVIOUS.c.hash)
+            .select_from(events.outerjoin(_PREVIOUS, _PREVIOUS.c.seq == events.c.seq - 1)))
+    query = _filtered(conn, base, where)
+    if query is None:
+        return
+    for row in _stream(conn, query):
+        seq, event_id, kind, code, source, payload, occurred, recorded, version, digest, prev = row
+        if prev is None and seq == 1:
+            prev = GENESIS_HASH
+        yield StoredRecord(int(seq), event_id, kind, code, source, payload, int(occurred),
+                           int(recorded), int(version), digest, prev)
+
+
+def _stream(conn: Connection, query: Select[Any]) -> Iterator[Sequence[Any]]:
+    """Rows of one statement in chunks: SQLite steps lazily, PostgreSQL uses a server cursor."""
+    result = conn.execute(query.execution_options(yield_per=READ_CHUNK))
+    for chunk in result.partitions():
+        yield from chunk
+
+
+def _filtered(conn: Connection, query: Select[Any], where: RecordFilter) -> Select[Any] | None:
+    """``query`` restricted by ``where`` in seq order; None when no stored code can match."""
+    query = query.order_by(events.c.seq)
     if where.fault_code is not None:
         query = query.where(events.c.fault_code == where.fault_code)
+    if where.codes:
+        codes = matching_codes(conn, where.codes)
+        if not codes:
+            return None
+        query = query.where(events.c.fault_code.in_(codes))
     if where.source_id is not None:
         query = query.where(events.c.source_id == where.source_id)
     if where.since_ns is not None:
         query = query.where(events.c.occurred_at_ns >= where.since_ns)
     if where.until_ns is not None:
         query = query.where(events.c.occurred_at_ns < where.until_ns)
+    if where.from_seq is not None:
+        query = query.where(events.c.seq >= where.from_seq)
+    if where.to_seq is not None:
+        query = query.where(events.c.seq <= where.to_seq)
     if where.kinds:
         query = query.where(events.c.kind.in_(where.kinds))
     if where.limit is not None:
         query = query.limit(where.limit)
-    return [_to_record(row) for row in conn.execute(query)]
+    return query
+
+
+def matching_codes(conn: Connection, patterns: Sequence[str]) -> list[str]:
+    """Exact codes as given plus the stored codes a glob matches (fnmatch, case-sensitive).
+
+    Globs are matched in Python against the distinct stored codes, so the records themselves
+    are then selected through ``ix_events_fault_code_seq`` with a plain ``IN``.
+    """
+    found = {pattern for pattern in patterns if not is_glob(pattern)}
+    globs = [pattern for pattern in patterns if is_glob(pattern)]
+    if globs:
+        prefix = _common_prefix([_literal_prefix(g) for g in globs])
+        found.update(code for code in distinct_codes(conn, prefix)
+                     if any(fnmatchcase(code, g) for g in globs))
+    return sorted(found)
+
+
+def _literal_prefix(pattern: str) -> str:
+    cut = min((i for i, char in enumerate(pattern) if char in GLOB_CHARACTERS),
+              default=len(pattern))
+    return pattern[:cut]
+
+
+def _common_prefix(texts: Sequence[str]) -> str:
+    """Longest string every text starts with (character by character)."""
+    first, last = min(texts), max(texts)
+    size = next((i for i, (a, b) in enumerate(zip(first, last, strict=False)) if a != b),
+                min(len(first), len(last)))
+    return first[:size]
+
+
+def distinct_codes(conn: Connection, prefix: str = "") -> Iterator[str]:
+    """Distinct stored fault codes in order, by a loose index scan of ix_events_fault_code_seq.
+
+    One index seek per distinct code instead of a pass over every record. On SQLite (binary
+    collation) the scan starts at ``prefix`` and stops after the codes that start with it;
+    elsewhere a collation may order codes differently, so every code is visited.
+    """
+    bounded = bool(prefix) and conn.dialect.name == "sqlite"
+    column = events.c.fault_code
+    last: str | None = None
+    while True:
+        if last is not None:
+            condition = column > last
+        elif bounded:
+            condition = column >= prefix
+        else:
+            condition = column.is_not(None)
+        code = conn.execute(select(func.min(column)).where(condition)).scalar()
+        if code is None or (bounded and not str(code).startswith(prefix)):
+            return
+        last = str(code)
+        yield last
+
+
+def hash_at(conn: Connection, seq: int) -> str | None:
+    """The stored hash of record ``seq`` (GENESIS_HASH for seq 0), None when it is missing."""
+    if seq == 0:
+        return GENESIS_HASH
+    found = conn.execute(select(events.c.hash).where(events.c.seq == seq)).scalar()
+    return None if found is None else str(found)
 
 
 def last_seq_recorded_by(conn: Connection, recorded_at_ns: int) -> int:
@@ -155,10 +303,19 @@ class ChainCheck:
     problem: str | None
 
 
-def check_chain(conn: Connection) -> ChainCheck:
-    """Recompute every hash in seq order: edits, deletions, insertions and reorders show up."""
-    prev_seq, prev_hash, count = 0, GENESIS_HASH, 0
-    for row in _rows(conn):
+def check_chain(conn: Connection, from_seq: int = 1, to_seq: int | None = None) -> ChainCheck:
+    """Recompute every hash in seq order: edits, deletions, insertions and reorders show up.
+
+    A segment [from_seq, to_seq] starts from the stored hash of record ``from_seq - 1`` and
+    must reach ``to_seq``; records outside it are not read (beyond that one hash).
+    """
+    prev_seq, prev_hash, count = from_seq - 1, GENESIS_HASH, 0
+    if from_seq > 1:
+        anchor = hash_at(conn, prev_seq)
+        if anchor is None:
+            return ChainCheck(0, prev_seq, "", *_missing(conn, prev_seq, prev_seq))
+        prev_hash = anchor
+    for row in _rows(conn, prev_seq, to_seq):
         seq, event_id, kind, code, source, payload, occurred, recorded, version, digest = row
         count += 1
         if seq != prev_seq + 1:
@@ -172,4 +329,21 @@ def check_chain(conn: Connection) -> ChainCheck:
                               f"record {seq} does not match its hash: it was edited, "
                               "inserted or moved")
         prev_seq, prev_hash = seq, digest
+    # A segment must reach its end; an open one that starts after seq 1 must hold a record.
+    last_needed = to_seq if to_seq is not None else (from_seq if from_seq > 1 else 0)
+    if prev_seq < last_needed:
+        first_bad, problem = _missing(conn, prev_seq + 1, last_needed)
+        return ChainCheck(count, prev_seq, prev_hash, first_bad, problem)
     return ChainCheck(count, prev_seq, prev_hash, None, None)
+
+
+def _missing(conn: Connection, seq: int, last_needed: int) -> tuple[int, str]:
+    """First bad seq and the problem when record ``seq``, which a check up to ``last_needed``
+    reads, is not stored: a hole in the log, or a log that ends too early."""
+    following = conn.execute(select(func.min(events.c.seq)).where(events.c.seq > seq)).scalar()
+    if following is None:
+        head_seq = head(conn)[0]
+        return head_seq + 1, (f"the log ends at seq {head_seq}, before record {last_needed} "
+                              "that the range needs: records were deleted or never written")
+    return seq, (f"record {seq} is missing (next stored record is {following}): records were "
+                 "deleted or renumbered")

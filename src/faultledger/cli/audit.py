@@ -1,0 +1,342 @@
+"""The audit commands: `history` (filters, CSV/JSON Lines export), `verify` (whole log or a
+segment) and `state-at` (the fault table as of a seq or time). Registered by cli/main.py.
+
+They only read: the database is never created, migrated or written. Bad input is one line on
+stderr and exit 2; a failed check is exit 1.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import sys
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from datetime import UTC, datetime
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated, Any, NoReturn, TextIO
+
+import typer
+
+from faultledger.cli import render
+from faultledger.domain.events import KINDS
+from faultledger.domain.integrity import GENESIS_HASH
+from faultledger.errors import FaultLedgerError
+from faultledger.service.config import load_settings
+from faultledger.service.ledger import (
+    FaultLedger,
+    export_history,
+    seq_recorded_by,
+    seqs_recorded_between,
+)
+from faultledger.store.event_log import StoredRecord
+
+# The same options as cli/main.py's (kept here: main imports this module, not the reverse).
+DbOption = Annotated[
+    str | None,
+    typer.Option("--db", envvar="FAULTLEDGER_DB", show_envvar=True,
+                 help="Database URL (default: the config's, else sqlite:///var/faultledger.db)."),
+]
+ConfigOption = Annotated[
+    Path | None,
+    typer.Option("--config", envvar="FAULTLEDGER_CONFIG", show_envvar=True,
+                 help="YAML configuration file (see config/faultledger.yaml)."),
+]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of text.")]
+
+TIME_HELP = ("ISO 8601 date or date-time; without an offset it is this machine's local time "
+             "(add Z or +00:00 for UTC)")
+
+
+class Format(StrEnum):
+    """Output of `history`: a terminal table, or an export with every stored column."""
+
+    table = "table"
+    csv = "csv"
+    jsonl = "jsonl"
+
+
+EXPORT_COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "occurred_at",
+                  "occurred_at_ns", "recorded_at", "recorded_at_ns", "schema_version",
+                  "payload", "prev_hash", "hash")
+"""Export columns, in order (docs/operations.md, "Export formats")."""
+
+
+def register(app: typer.Typer) -> None:
+    """Add the audit commands to the `faultledger` app."""
+    app.command("history")(history)
+    app.command("verify")(verify)
+    app.command("state-at")(state_at)
+
+
+def history(
+    code: Annotated[list[str] | None, typer.Option(
+        "--code", help="Fault code, or a case-sensitive glob such as 'HW_*_EMERGENCY_STOP' "
+        "(repeatable: any of them).")] = None,
+    source: Annotated[str | None, typer.Option("--source", help="Exact source id.")] = None,
+    since: Annotated[str | None, typer.Option(
+        "--since", help=f"occurred_at from (inclusive); {TIME_HELP}.")] = None,
+    until: Annotated[str | None, typer.Option(
+        "--until", help="occurred_at before (exclusive); same format as --since.")] = None,
+    from_seq: Annotated[int | None, typer.Option(
+        "--from-seq", min=1, help="First seq (inclusive).")] = None,
+    to_seq: Annotated[int | None, typer.Option(
+        "--to-seq", min=1, help="Last seq (inclusive).")] = None,
+    kind: Annotated[list[str] | None, typer.Option(
+        "--kind", help=f"Record kind (repeatable): {', '.join(KINDS)}.")] = None,
+    limit: Annotated[int | None, typer.Option("--limit", min=1,
+                                              help="At most this many records.")] = None,
+    fmt: Annotated[Format | None, typer.Option(
+        "--format", help="table (default), csv or jsonl (JSON Lines).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Same as --format jsonl.")] = False,
+    as_csv: Annotated[bool, typer.Option("--csv", help="Same as --format csv.")] = False,
+    output: Annotated[Path | None, typer.Option(
+        "--output", "-o", help="Write the export to this file (default: stdout).")] = None,
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """The audit history: log records in seq order; CSV/JSON Lines carry every stored column
+    and hash, so the chain can be recomputed from the export alone."""
+    chosen = _output_format(fmt, as_json, as_csv)
+    _check_seq_range(from_seq, to_seq)
+    if output is not None and chosen is Format.table:
+        _fail("--output writes an export: add --format csv or --format jsonl")
+    filters: dict[str, Any] = {
+        "codes": code or None, "source": source, "since": _parse_time(since, "--since"),
+        "until": _parse_time(until, "--until"), "kinds": kind or (), "limit": limit,
+        "from_seq": from_seq, "to_seq": to_seq,
+    }
+    with _ledger(db, config) as ledger:
+        if chosen is Format.table:
+            records = ledger.history(**filters)
+            render.console().print(render.history_table(records))
+            return
+        rows = export_history(ledger, **filters)
+        writer = _write_csv if chosen is Format.csv else _write_jsonl
+        count = _export(rows, writer, output)
+    if output is not None:
+        render.console(stderr=True).print(f"wrote {count} records to {output}")
+
+
+def verify(
+    from_seq: Annotated[int | None, typer.Option(
+        "--from-seq", min=1, help="First seq of the segment (its predecessor's stored hash "
+        "is the anchor).")] = None,
+    to_seq: Annotated[int | None, typer.Option(
+        "--to-seq", min=1, help="Last seq of the segment (inclusive).")] = None,
+    since: Annotated[str | None, typer.Option(
+        "--since", help=f"Segment from the first record recorded at or after this; "
+        f"{TIME_HELP}.")] = None,
+    until: Annotated[str | None, typer.Option(
+        "--until", help="Segment up to the last record recorded at or before this (the "
+        "prefix `state-at` uses).")] = None,
+    as_json: JsonOption = False,
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """Check the hash chain (and, for the whole log, that the projections equal a full replay);
+    with a range, only that segment, from the stored hash of the record before it."""
+    if (since is not None or until is not None) and (from_seq is not None or to_seq is not None):
+        _fail("give a seq range (--from-seq/--to-seq) or a time range (--since/--until), "
+              "not both")
+    _check_seq_range(from_seq, to_seq)
+    with _ledger(db, config) as ledger:
+        start, end = from_seq, to_seq
+        if since is not None or until is not None:
+            start, end = seqs_recorded_between(ledger, _parse_time(since, "--since"),
+                                               _parse_time(until, "--until"))
+        ranged = start is not None or end is not None
+        report_ = ledger.verify(start, end) if ranged else ledger.verify()
+        first = 1 if start is None else start
+        anchor = _stored_hash(ledger, first - 1) if ranged else GENESIS_HASH
+    if as_json:
+        data: dict[str, Any] = {
+            "ok": report_.ok, "records": report_.records, "head_seq": report_.head_seq,
+            "head_hash": report_.head_hash, "first_bad_seq": report_.first_bad_seq,
+            "problems": report_.problems}
+        if ranged:
+            data.update({"from_seq": first, "to_seq": end, "anchor_seq": first - 1,
+                         "anchor_hash": anchor})
+        typer.echo(json.dumps(data, indent=2))
+    elif report_.ok and not ranged:
+        typer.echo(f"OK: {report_.records} records, chain intact, projections equal a full "
+                   f"replay; head seq {report_.head_seq} hash {report_.head_hash}")
+    elif report_.ok:
+        origin = ("the genesis hash" if first == 1
+                  else f"the stored hash of record {first - 1} ({anchor})")
+        typer.echo(f"OK: records {first}..{report_.head_seq} ({report_.records} records), chain "
+                   f"intact from {origin}; seq {report_.head_seq} hash {report_.head_hash}")
+    else:
+        for problem in report_.problems:
+            render.complain("FAILED:", problem)
+        if report_.first_bad_seq is not None:
+            typer.echo(f"first bad seq: {report_.first_bad_seq}")
+    if not report_.ok:
+        raise typer.Exit(1)
+
+
+def state_at(
+    when: Annotated[str, typer.Argument(
+        metavar="WHEN|SEQ", help=f"A seq number, or a time: {TIME_HELP}. A time means the "
+        "records recorded at or before it (what the ledger knew then).")],
+    as_json: JsonOption = False,
+    db: DbOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """The fault table (every status) as of a seq or a time: a replay of that log prefix, with
+    the hash of its last record, which anchors it."""
+    moment: datetime | int
+    if when.strip().isdigit():
+        moment = int(when)
+    else:
+        moment = _parse_time(when, "WHEN|SEQ", "a seq number or an ISO 8601 date or time") or 0
+    with _ledger(db, config) as ledger:
+        seq = seq_recorded_by(ledger, moment)
+        faults = ledger.state_at(seq)
+        digest = _stored_hash(ledger, seq)
+    at = None if isinstance(moment, int) else moment.astimezone(UTC).isoformat()
+    if as_json:
+        typer.echo(json.dumps({"seq": seq, "hash": digest, "at": at,
+                               "faults": [render.fault_dict(f) for f in faults]}, indent=2))
+        return
+    title = f"faults as of seq {seq}" + (f" (recorded at or before {at})" if at else "")
+    out = render.console()
+    out.print(render.faults_table(faults, title))
+    out.print(f"seq {seq} hash {digest}")
+
+
+# -- export ----------------------------------------------------------------------------------
+def iso_ns(ns: int) -> str:
+    """ISO 8601 UTC with all nine digits of the stored nanoseconds."""
+    seconds, rest = divmod(ns, 1_000_000_000)
+    return (datetime.fromtimestamp(seconds, tz=UTC).strftime("%Y-%m-%dT%H:%M:%S")
+            + f".{rest:09d}+00:00")
+
+
+def export_row(record: StoredRecord) -> dict[str, Any]:
+    """One record as an export object; ``payload`` is the stored canonical JSON, parsed."""
+    return {
+        "seq": record.seq,
+        "event_id": record.event_id,
+        "kind": record.kind,
+        "fault_code": record.fault_code,
+        "source_id": record.source_id,
+        "occurred_at": iso_ns(record.occurred_at_ns),
+        "occurred_at_ns": record.occurred_at_ns,
+        "recorded_at": iso_ns(record.recorded_at_ns),
+        "recorded_at_ns": record.recorded_at_ns,
+        "schema_version": record.schema_version,
+        "payload": json.loads(record.payload_json),
+        "prev_hash": record.prev_hash,
+        "hash": record.hash,
+    }
+
+
+Writer = Callable[[Iterable[StoredRecord], TextIO], int]
+
+
+def _write_jsonl(rows: Iterable[StoredRecord], out: TextIO) -> int:
+    count = 0
+    for record in rows:
+        out.write(json.dumps(export_row(record), ensure_ascii=False) + "\n")
+        count += 1
+    return count
+
+
+def _write_csv(rows: Iterable[StoredRecord], out: TextIO) -> int:
+    """CSV with a header; NULL is an empty cell; payload is the stored canonical JSON text."""
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(EXPORT_COLUMNS)
+    count = 0
+    for r in rows:
+        writer.writerow([r.seq, r.event_id, r.kind, r.fault_code or "", r.source_id or "",
+                         iso_ns(r.occurred_at_ns), r.occurred_at_ns, iso_ns(r.recorded_at_ns),
+                         r.recorded_at_ns, r.schema_version, r.payload_json,
+                         r.prev_hash or "", r.hash])
+        count += 1
+    return count
+
+
+def _export(rows: Iterator[StoredRecord], write: Writer, output: Path | None) -> int:
+    """Stream rows out. A file appears only once complete (written beside it, then renamed)."""
+    if output is None:
+        try:
+            count = write(rows, sys.stdout)
+            sys.stdout.flush()
+        except BrokenPipeError:  # `| head`: the reader left; say nothing more
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            raise typer.Exit(1) from None
+        return count
+    partial = output.with_name(output.name + ".partial")
+    try:
+        with partial.open("w", encoding="utf-8", newline="") as out:
+            count = write(rows, out)
+        partial.replace(output)
+    except OSError as error:
+        partial.unlink(missing_ok=True)
+        _fail(f"cannot write {output}: {error.strerror or error}")
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    return count
+
+
+# -- helpers ---------------------------------------------------------------------------------
+def _fail(message: str, code: int = 2) -> NoReturn:
+    render.complain("error:", message)
+    raise typer.Exit(code)
+
+
+@contextmanager
+def _ledger(db: str | None, config: Path | None) -> Iterator[FaultLedger]:
+    """A read-only ledger (nothing created, migrated or recorded); its errors become one line
+    and exit 2 also when the app runs without cli.main's wrapper (tests, embedding)."""
+    try:
+        settings = load_settings(config)
+        ledger = FaultLedger.open(db or settings.database.url, create=False, upgrade=False,
+                                  max_batch=settings.database.max_batch, background=False)
+    except FaultLedgerError as error:
+        _fail(str(error))
+    try:
+        yield ledger
+    except FaultLedgerError as error:
+        _fail(str(error))
+    finally:
+        ledger.close()
+
+
+def _parse_time(text: str | None, name: str, expected: str = "an ISO 8601 date or time"
+                ) -> datetime | None:
+    """ISO 8601 date or date-time; one without an offset is this machine's local time (as in
+    the other commands)."""
+    if text is None:
+        return None
+    try:
+        moment = datetime.fromisoformat(text.strip())
+    except ValueError:
+        _fail(f"{name} must be {expected} (e.g. 2026-11-21, 2026-11-21T22:00 or "
+              f"2026-11-21T22:00Z), got {text!r}")
+    return moment if moment.tzinfo is not None else moment.astimezone()
+
+
+def _check_seq_range(from_seq: int | None, to_seq: int | None) -> None:
+    if from_seq is not None and to_seq is not None and from_seq > to_seq:
+        _fail(f"--from-seq {from_seq} is after --to-seq {to_seq}: the range is empty")
+
+
+def _output_format(fmt: Format | None, as_json: bool, as_csv: bool) -> Format:
+    chosen = [f for f in (fmt, Format.jsonl if as_json else None, Format.csv if as_csv else None)
+              if f is not None]
+    if len(set(chosen)) > 1:
+        _fail("choose one output format: --format, --json or --csv")
+    return chosen[0] if chosen else Format.table
+
+
+def _stored_hash(ledger: FaultLedger, seq: int) -> str | None:
+    """The stored hash of record ``seq`` (the genesis hash for 0), None when it is missing."""
+    if seq == 0:
+        return GENESIS_HASH
+    return next((r.hash for r in export_history(ledger, from_seq=seq, to_seq=seq)), None)
