@@ -72,6 +72,7 @@ def upgrade() -> None:
         sa.Column("start_offset_ns", sa.BigInteger(), nullable=False),
         sa.Column("ends", sa.Integer(), nullable=False),
         sa.Column("end_offset_ns", sa.BigInteger(), nullable=False),
+        sa.Column("repairs", sa.Integer(), nullable=False),
         sa.Column("repair_ns", sa.BigInteger(), nullable=False),
     )
 

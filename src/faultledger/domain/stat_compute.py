@@ -82,7 +82,7 @@ def _key(group_by: Sequence[str], code: str, source: str, severity: int) -> Grou
 
 
 def _episode_end(episode: Episode, as_of_ns: int) -> int:
-    return episode.end_ns if episode.end_ns is not None else max(episode.start_ns, as_of_ns)
+    return episode.stop_ns(as_of_ns)
 
 
 def _add_episode(tally: _Tally, bounds: _Bounds, i: int, episode: Episode, end: int) -> None:
@@ -153,7 +153,8 @@ class PeriodSums:
 
     sums: Sequence[Sequence[int]]
     """Per period: i, the seven counts, starts, Σ starts·minute, Σ start offsets, ends,
-    Σ ends·minute, Σ end offsets, Σ repair ns (periods without minutes may be missing)."""
+    Σ ends·minute, Σ end offsets, repairs, Σ repair ns (periods without minutes may be
+    missing)."""
     busy_windows: Sequence[tuple[int, int, int]]
     """(period i, 10-minute window, confirmations) of windows in flood."""
     top_confirmations: Mapping[int, int]
@@ -183,8 +184,8 @@ def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> lis
         starts, start_minutes, start_offsets, ends, end_minutes, end_offsets = row[8:14]
         edges[i] = [starts, start_minutes * NS_PER_MINUTE + start_offsets,
                     ends, end_minutes * NS_PER_MINUTE + end_offsets]
-        tally.repairs = ends
-        tally.repair_ns = row[14]
+        tally.repairs = row[14]
+        tally.repair_ns = row[15]
     first = bounds.starts[0]
     open_now = data.closed_open_at_start
     for _, start, _ in data.open_spans:

@@ -39,8 +39,8 @@ class StatFact(NamedTuple):
 class Episode(NamedTuple):
     """Time in CONFIRMED, owned by the code, source and severity of the confirming fact.
 
-    ``end_ns`` is never before ``start_ns``: when the reporter's clock ran backwards the
-    episode lasts 0 s.
+    ``end_ns`` is the time of the record that ended it. When the reporter's clock ran
+    backwards that is before ``start_ns``: the episode then lasts 0 s (``stop_ns``).
     """
 
     start_seq: int
@@ -53,7 +53,11 @@ class Episode(NamedTuple):
 
     @property
     def repair_ns(self) -> int:
-        return 0 if self.end_ns is None else self.end_ns - self.start_ns
+        return 0 if self.end_ns is None else max(0, self.end_ns - self.start_ns)
+
+    def stop_ns(self, as_of_ns: int) -> int:
+        """Where the time in CONFIRMED ends: never before the start; ``as_of`` while open."""
+        return max(self.start_ns, as_of_ns if self.end_ns is None else self.end_ns)
 
 
 class CodeTrack(NamedTuple):
@@ -188,7 +192,7 @@ class StatsFold:
         self._out.facts.append(fact)
         episode = track.episode
         if came is FaultStatus.CONFIRMED and episode is not None:
-            ended = episode._replace(end_seq=record.seq, end_ns=max(at, episode.start_ns))
+            ended = episode._replace(end_seq=record.seq, end_ns=at)
             self._out.ended.append(ended)
             self._replace_started(ended)
             episode = None

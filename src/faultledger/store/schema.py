@@ -142,11 +142,13 @@ stat_minutes = Table(
     Column("start_offset_ns", BigInteger, nullable=False),
     Column("ends", Integer, nullable=False),
     Column("end_offset_ns", BigInteger, nullable=False),
+    Column("repairs", Integer, nullable=False),
     Column("repair_ns", BigInteger, nullable=False),
 )
 """Sums per minute of ``at_ns`` (minute = at_ns // 60e9). Episode starts and ends keep their
-offsets within the minute, so active time over whole minutes is exact; ``ends`` doubles as
-the repair count."""
+offsets within the minute, so active time over whole minutes is exact. Repairs count in
+the minute of the record that ended the episode; ``ends`` in the minute where its time in
+CONFIRMED stops (later, when the reporter's clock ran backwards)."""
 
 stat_codes = Table(
     "stat_codes",

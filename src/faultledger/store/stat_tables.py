@@ -72,7 +72,8 @@ def _minute_rows(output: StatsOutput) -> list[dict[str, Any]]:
         row = sums.get(minute)
         if row is None:
             row = sums[minute] = dict.fromkeys(
-                (*_FLAGS, "starts", "start_offset_ns", "ends", "end_offset_ns", "repair_ns"), 0)
+                (*_FLAGS, "starts", "start_offset_ns", "ends", "end_offset_ns", "repairs",
+                 "repair_ns"), 0)
         return minute, row
 
     for fact in output.facts:
@@ -85,9 +86,12 @@ def _minute_rows(output: StatsOutput) -> list[dict[str, Any]]:
         row["start_offset_ns"] += episode.start_ns - minute * NS_PER_MINUTE
     for episode in output.ended:
         assert episode.end_ns is not None
-        minute, row = bucket(episode.end_ns)
+        stop = episode.stop_ns(episode.end_ns)
+        minute, row = bucket(stop)
         row["ends"] += 1
-        row["end_offset_ns"] += episode.end_ns - minute * NS_PER_MINUTE
+        row["end_offset_ns"] += stop - minute * NS_PER_MINUTE
+        _, row = bucket(episode.end_ns)  # the repair counts where its record is
+        row["repairs"] += 1
         row["repair_ns"] += episode.repair_ns
     return [{"minute": minute, **row} for minute, row in sums.items()]
 
@@ -156,14 +160,14 @@ def _periods(edges: Sequence[tuple[int, int]], unit: str) -> Any:
 
 def period_sums(conn: Connection, minute_edges: Sequence[tuple[int, int]]) -> list[tuple[int, ...]]:
     """Per period i (bounds in whole minutes): i, the seven counts, starts, Σ starts·minute,
-    Σ start offsets, ends, Σ ends·minute, Σ end offsets, Σ repair ns."""
+    Σ start offsets, ends, Σ ends·minute, Σ end offsets, repairs, Σ repair ns."""
     p = _periods(minute_edges, "minute")
     m = stat_minutes.c
     query = (
         select(p.c.i, *(func.sum(m[flag]) for flag in _FLAGS),
                func.sum(m.starts), func.sum(m.starts * m.minute), func.sum(m.start_offset_ns),
                func.sum(m.ends), func.sum(m.ends * m.minute), func.sum(m.end_offset_ns),
-               func.sum(m.repair_ns))
+               func.sum(m.repairs), func.sum(m.repair_ns))
         .select_from(p.join(stat_minutes, and_(m.minute >= p.c.a, m.minute < p.c.b)))
         .group_by(p.c.i)
     )
@@ -273,8 +277,11 @@ def facts(conn: Connection, since_ns: int, until_ns: int,
 def episodes(conn: Connection, since_ns: int, until_ns: int,
              only: Sequence[str] | None) -> list[Episode]:
     """Episodes that overlap [since, until) or are still open (the caller ends those)."""
-    overlaps = and_(stat_episodes.c.start_ns < until_ns,
-                    or_(stat_episodes.c.end_ns.is_(None), stat_episodes.c.end_ns > since_ns))
+    e = stat_episodes.c
+    overlaps = or_(
+        and_(e.start_ns < until_ns, or_(e.end_ns.is_(None), e.end_ns > since_ns)),
+        and_(e.end_ns >= since_ns, e.end_ns < until_ns),  # a repair even if the clock ran back
+    )
     found: list[Episode] = []
     for chunk in _chunks(only):
         query = select(stat_episodes).where(overlaps)
