@@ -92,3 +92,20 @@ def fetch_all(conn: Connection, statement: ClauseElement,
     finally:
         cursor.close()
     return rows
+
+
+def fetch_all_rendered(conn: Connection, statement: ClauseElement) -> list[tuple[Any, ...]]:
+    """Run a read whose parameters are plain ints and strings with every value rendered into
+    the SQL by SQLAlchemy's own literal quoting, straight on the DBAPI cursor.
+
+    For reads of tens of thousands of rows (statistics facts), where SQLAlchemy's per-row
+    result processing costs more than SQLite's work; ``IN`` lists need no expansion step.
+    """
+    sql = str(statement.compile(dialect=conn.dialect, compile_kwargs={"literal_binds": True}))
+    cursor = _cursor(conn)
+    try:
+        cursor.execute(sql)
+        rows: list[tuple[Any, ...]] = cursor.fetchall()
+    finally:
+        cursor.close()
+    return rows

@@ -270,7 +270,7 @@ def facts(conn: Connection, since_ns: int, until_ns: int,
         query = select(stat_facts).where(window)
         if chunk is not None:
             query = query.where(stat_facts.c.fault_code.in_(chunk))
-        found.extend(StatFact(*row) for row in conn.execute(query))
+        found.extend(StatFact(*row) for row in fastpath.fetch_all_rendered(conn, query))
     return found
 
 
@@ -287,7 +287,7 @@ def episodes(conn: Connection, since_ns: int, until_ns: int,
         query = select(stat_episodes).where(overlaps)
         if chunk is not None:
             query = query.where(stat_episodes.c.fault_code.in_(chunk))
-        found.extend(_episode(row) for row in conn.execute(query))
+        found.extend(Episode(*row) for row in fastpath.fetch_all_rendered(conn, query))
     return found
 
 
