@@ -45,6 +45,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/ingest.py
 	$(BIN)/python bench/rebuild.py --keep var/bench/rebuild.db
 	$(BIN)/python bench/startup.py --db var/bench/rebuild.db
+	$(BIN)/python bench/stats_query.py
 
 clean:
 	rm -rf $(VENV) var .pytest_cache .mypy_cache .ruff_cache .hypothesis
