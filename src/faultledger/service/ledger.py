@@ -297,7 +297,7 @@ class FaultLedger:
             episodes = stat_tables.episodes(conn, since_ns, until_ns, None)
         found: list[Downtime] = []
         for e in episodes:
-            end_ns = e.end_ns if e.end_ns is not None else max(e.start_ns, as_of_ns)
+            end_ns = e.stop_ns(as_of_ns)  # never before the start (a clock run backwards)
             inside = min(end_ns, until_ns) - max(e.start_ns, since_ns)
             if inside > 0:
                 found.append(Downtime(
