@@ -9,11 +9,7 @@ No action type is installed here, so the "action servers" publish GoalStatusArra
 from __future__ import annotations
 
 import json
-import queue
-import signal
-import subprocess
 import sys
-import threading
 import time
 import uuid
 from collections.abc import Callable
@@ -22,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import yaml
+from tests.ros.processes import LineProcess
 
 from faultledger.ros.bridges.action_status_mapping import (
     STATUS_ABORTED,
@@ -39,45 +36,14 @@ DRIVER = Path(__file__).with_name("drive_action_server.py")
 DISCOVERY_SEC = 30.0
 
 
-class Proc:
-    """A child process: stdin for commands, stdout lines on a queue, stderr in a file."""
+
+class Proc(LineProcess):
+    stop_wait_sec = 15.0
 
     def __init__(self, args: list[str], log: Path) -> None:
-        self.log = log
-        with log.open("w") as err:
-            self.popen = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                          stderr=err, text=True)
-        self.lines: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._pump, daemon=True).start()
+        super().__init__(args, log, timeout=DISCOVERY_SEC)
 
-    def _pump(self) -> None:
-        assert self.popen.stdout is not None
-        for line in self.popen.stdout:
-            self.lines.put(line.rstrip("\n"))
 
-    def expect(self, prefix: str, timeout: float = DISCOVERY_SEC) -> str:
-        deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                line = self.lines.get(timeout=left)
-            except queue.Empty:
-                break
-            if line.startswith(prefix):
-                return line
-        raise AssertionError(f"{self.log.name}: no line {prefix!r} within {timeout} s; "
-                             f"stderr:\n{self.log.read_text()[-4000:]}")
-
-    def stderr(self) -> str:
-        return self.log.read_text(encoding="utf-8", errors="replace")
-
-    def stop(self) -> int:
-        if self.popen.poll() is None:
-            self.popen.send_signal(signal.SIGTERM)
-            try:
-                self.popen.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-        return self.popen.wait()
 
 
 class Driver(Proc):
@@ -90,11 +56,8 @@ class Driver(Proc):
         self.expect("driver ready")
 
     def send(self, *command: Any) -> None:
-        assert self.popen.stdin is not None
         self.count += 1
-        self.popen.stdin.write(json.dumps(list(command)) + "\n")
-        self.popen.stdin.flush()
-        self.expect(f"ok {self.count}", 10.0)
+        self.ask(list(command), f"ok {self.count}", 10.0)
 
     def exit(self) -> int:
         """EOF: the driver destroys its node and exits; its actions vanish from the graph."""

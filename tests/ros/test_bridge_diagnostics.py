@@ -10,11 +10,7 @@ class; every test uses its own status names.
 from __future__ import annotations
 
 import json
-import queue
-import signal
-import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -23,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
+from tests.ros.processes import LineProcess
 
 from faultledger.ros.bridges.diagnostics_mapping import generate_code
 
@@ -46,52 +43,15 @@ CONFIG = {
 }
 
 
-class Proc:
-    """A child process whose stdout lines land on a queue, so reads time out and never block."""
+
+class Proc(LineProcess):
+    """A bridge or publisher; ``stop(None)`` only closes stdin, which ends the publisher."""
+
+    close_stdin_on_stop = True
 
     def __init__(self, args: list[str], log: Path) -> None:
-        self.log = log
-        with log.open("w") as err:
-            self.popen = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                          stderr=err, text=True)
-        self.lines: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._pump, daemon=True).start()
+        super().__init__(args, log, timeout=WAIT_SEC)
 
-    def _pump(self) -> None:
-        assert self.popen.stdout is not None
-        for line in self.popen.stdout:
-            self.lines.put(line.rstrip("\n"))
-
-    def expect(self, prefix: str, timeout: float = WAIT_SEC) -> str:
-        """The next stdout line starting with ``prefix`` (earlier lines are skipped)."""
-        deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                line = self.lines.get(timeout=left)
-            except queue.Empty:
-                break
-            if line.startswith(prefix):
-                return line
-        raise AssertionError(f"{self.log.name}: no line {prefix!r} within {timeout} s; "
-                             f"stderr:\n{self.log.read_text()[-4000:]}")
-
-    def order(self, order: dict[str, Any], answer: str) -> str:
-        assert self.popen.stdin is not None
-        self.popen.stdin.write(json.dumps(order) + "\n")
-        self.popen.stdin.flush()
-        return self.expect(answer)
-
-    def stop(self, sig: int | None = signal.SIGTERM) -> int:
-        """Send ``sig`` (None: only close stdin, which ends the publisher) and wait."""
-        if self.popen.stdin is not None:
-            self.popen.stdin.close()
-        if sig is not None and self.popen.poll() is None:
-            self.popen.send_signal(sig)
-        try:
-            self.popen.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.popen.kill()
-        return self.popen.wait()
 
 
 @dataclass
@@ -102,11 +62,11 @@ class Rig:
 
     def publish(self, *statuses: dict[str, Any]) -> None:
         """From now on the publisher repeats exactly these statuses."""
-        self.publisher.order({"set": list(statuses)}, "set ")
+        self.publisher.ask({"set": list(statuses)}, "set ")
 
     def ticks(self, n: int) -> None:
         """Wait until the current array was published ``n`` more times."""
-        self.publisher.order({"ticks": n}, "ticked")
+        self.publisher.ask({"ticks": n}, "ticked")
 
     def reports(self, code: str) -> list[tuple[str, int, str]]:
         """(event_type, severity, source_id) of every report of ``code`` the ledger holds."""

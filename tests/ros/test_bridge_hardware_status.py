@@ -10,12 +10,7 @@ publisher serve the whole class; every test uses its own hardware id.
 from __future__ import annotations
 
 import json
-import queue
-import signal
-import subprocess
 import sys
-import threading
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
+from tests.ros.processes import LineProcess
 
 if TYPE_CHECKING:
     from tests.ros.conftest import ManagerFactory, RosClient
@@ -41,51 +37,15 @@ CONFIG = {
 }
 
 
-class Proc:
-    """A child process whose stdout lines land on a queue, so reads time out and never block."""
+
+class Proc(LineProcess):
+    """A bridge or publisher; ``stop(None)`` only closes stdin, which ends the publisher."""
+
+    close_stdin_on_stop = True
 
     def __init__(self, args: list[str], log: Path) -> None:
-        self.log = log
-        with log.open("w") as err:
-            self.popen = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                          stderr=err, text=True)
-        self.lines: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._pump, daemon=True).start()
+        super().__init__(args, log, timeout=WAIT_SEC)
 
-    def _pump(self) -> None:
-        assert self.popen.stdout is not None
-        for line in self.popen.stdout:
-            self.lines.put(line.rstrip("\n"))
-
-    def expect(self, prefix: str, timeout: float = WAIT_SEC) -> str:
-        """The next stdout line starting with ``prefix`` (earlier lines are skipped)."""
-        deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                line = self.lines.get(timeout=left)
-            except queue.Empty:
-                break
-            if line.startswith(prefix):
-                return line
-        raise AssertionError(f"{self.log.name}: no line {prefix!r} within {timeout} s; "
-                             f"stderr:\n{self.log.read_text()[-4000:]}")
-
-    def order(self, order: dict[str, Any], answer: str) -> str:
-        assert self.popen.stdin is not None
-        self.popen.stdin.write(json.dumps(order) + "\n")
-        self.popen.stdin.flush()
-        return self.expect(answer)
-
-    def stop(self) -> int:
-        if self.popen.stdin is not None:
-            self.popen.stdin.close()
-        if self.popen.poll() is None:
-            self.popen.send_signal(signal.SIGTERM)
-        try:
-            self.popen.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.popen.kill()
-        return self.popen.wait()
 
 
 @dataclass
@@ -96,8 +56,8 @@ class Rig:
 
     def show(self, spec: dict[str, Any], ticks: int = 3) -> None:
         """Publish ``spec`` from now on, and wait until it went out ``ticks`` more times."""
-        self.publisher.order({"set": spec}, "set")
-        self.publisher.order({"ticks": ticks}, "ticked")
+        self.publisher.ask({"set": spec}, "set")
+        self.publisher.ask({"ticks": ticks}, "ticked")
 
     def reports(self, code: str) -> list[dict[str, Any]]:
         """Payloads of every report of ``code`` the ledger holds, in log order."""

@@ -8,16 +8,16 @@ the manager's services. Heartbeat timeout 2 s, so a loss shows within a few seco
 from __future__ import annotations
 
 import json
-import queue
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from tests.ros.processes import LineProcess
 
 if TYPE_CHECKING:
     from tests.ros.conftest import ManagerFactory, RosClient
@@ -28,48 +28,15 @@ NODE = "/robot1/lidar_driver"
 CODE = "NODE_ROBOT1_LIDAR_DRIVER_"
 
 
-class Proc:
-    """A child process whose stdout lines land on a queue, so reads time out and never block."""
 
+class Proc(LineProcess):
     def __init__(self, args: list[str], log: Path) -> None:
-        self.log = log
-        with log.open("w") as err:
-            self.popen = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                          stderr=err, text=True)
-        self.lines: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._pump, daemon=True).start()
-
-    def _pump(self) -> None:
-        assert self.popen.stdout is not None
-        for line in self.popen.stdout:
-            self.lines.put(line.rstrip("\n"))
-
-    def expect(self, prefix: str, timeout: float = DISCOVERY_SEC) -> str:
-        deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                line = self.lines.get(timeout=left)
-            except queue.Empty:
-                break
-            if line.startswith(prefix):
-                return line
-        raise AssertionError(f"{self.log.name}: no line {prefix!r} within {timeout} s; "
-                             f"stderr:\n{self.log.read_text()[-4000:]}")
+        super().__init__(args, log, timeout=DISCOVERY_SEC)
 
     def send(self, command: str) -> None:
-        assert self.popen.stdin is not None
-        self.popen.stdin.write(command + "\n")
-        self.popen.stdin.flush()
+        self.write(command)
         self.expect(f"ok {command.split(' ', 1)[0]}", 10.0)
 
-    def stop(self, sig: int = signal.SIGTERM) -> int:
-        if self.popen.poll() is None:
-            self.popen.send_signal(sig)
-            try:
-                self.popen.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-        return self.popen.wait()
 
 
 @contextmanager

@@ -9,11 +9,8 @@ from __future__ import annotations
 
 import json
 import os
-import queue
 import signal
-import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -27,51 +24,17 @@ SOURCE = "/test/reporter"
 DISCOVERY_SEC = 20.0
 
 
-class Proc:
-    """A child process whose stdout lines land on a queue, so reads time out and never block."""
+if __name__ != "__main__":  # the tests; run as a script this file is the reporter process
+    from tests.ros.processes import LineProcess
 
-    def __init__(self, args: list[str], log: Path) -> None:
-        self.log = log
-        with log.open("w") as err:
-            self.popen = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                          stderr=err, text=True)
-        self.lines: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._pump, daemon=True).start()
+    class Proc(LineProcess):
+        def __init__(self, args: list[str], log: Path) -> None:
+            super().__init__(args, log, timeout=DISCOVERY_SEC)
 
-    def _pump(self) -> None:
-        assert self.popen.stdout is not None
-        for line in self.popen.stdout:
-            self.lines.put(line.rstrip("\n"))
-
-    def expect(self, prefix: str, timeout: float = DISCOVERY_SEC) -> str:
-        """The next stdout line starting with ``prefix`` (earlier lines are skipped)."""
-        deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                line = self.lines.get(timeout=left)
-            except queue.Empty:
-                break
-            if line.startswith(prefix):
-                return line
-        raise AssertionError(f"{self.log.name}: no line {prefix!r} within {timeout} s; "
-                             f"stderr:\n{self.log.read_text()}")
-
-    def send(self, batch: list[list[object]]) -> list[bool]:
-        """Have the reporter process make these reports; returns what report() returned."""
-        assert self.popen.stdin is not None
-        self.popen.stdin.write(json.dumps(batch) + "\n")
-        self.popen.stdin.flush()
-        results: list[bool] = json.loads(self.expect("reported ", 10.0).split(" ", 1)[1])
-        return results
-
-    def stop(self, sig: int = signal.SIGTERM) -> int:
-        if self.popen.poll() is None:
-            self.popen.send_signal(sig)
-            try:
-                self.popen.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-        return self.popen.wait()
+        def send(self, batch: list[list[object]]) -> list[bool]:
+            """Have the reporter process make these reports; returns what report() returned."""
+            results: list[bool] = json.loads(self.ask(batch, "reported ", 10.0).split(" ", 1)[1])
+            return results
 
 
 @contextmanager
