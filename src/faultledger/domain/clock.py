@@ -7,6 +7,16 @@ from datetime import UTC, datetime
 NS_PER_SECOND = 1_000_000_000
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 
+MIN_NS = 0
+"""Earliest time the log holds: the Unix epoch (a robot whose clock was never set reports
+1970, never earlier)."""
+MAX_NS = 2**63 - 1
+"""Latest time the log holds: nanoseconds in a signed 64-bit integer (2262-04-11T23:47:16Z),
+what SQLite and PostgreSQL store in an INTEGER/BIGINT column."""
+MIN_TIME = _EPOCH
+MAX_TIME = datetime(2262, 4, 11, 23, 47, 16, 854775, tzinfo=UTC)
+TIME_RANGE_TEXT = "1970-01-01T00:00:00Z .. 2262-04-11T23:47:16Z"
+
 
 def to_ns(moment: datetime) -> int:
     """Nanoseconds since the Unix epoch; naive datetimes are refused so no local time sneaks in."""
@@ -14,6 +24,11 @@ def to_ns(moment: datetime) -> int:
         raise ValueError("time must be a timezone-aware datetime")
     delta = moment - _EPOCH
     return (delta.days * 86_400 + delta.seconds) * NS_PER_SECOND + delta.microseconds * 1_000
+
+
+def in_range(ns: int) -> bool:
+    """Whether the log can hold this time (see MIN_NS, MAX_NS)."""
+    return MIN_NS <= ns <= MAX_NS
 
 
 def from_ns(ns: int) -> datetime:

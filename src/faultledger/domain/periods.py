@@ -6,6 +6,7 @@ import re
 from datetime import UTC, date, datetime, time, timedelta
 from zoneinfo import ZoneInfo
 
+from faultledger.domain.clock import TIME_RANGE_TEXT
 from faultledger.domain.shifts import Period, ShiftCalendar, ShiftDefinition
 
 PERIOD_KINDS = ("shift", "day", "hour", "10min")
@@ -22,21 +23,31 @@ def default_calendar() -> ShiftCalendar:
     ))
 
 
-def periods(by: str, since: datetime, until: datetime, calendar: ShiftCalendar) -> list[Period]:
-    """[since, until) cut into periods of kind ``by``, each cropped to the range."""
+def periods(by: str, since: datetime, until: datetime, calendar: ShiftCalendar,
+            limit: int | None = None) -> list[Period]:
+    """[since, until) cut into periods of kind ``by``, each cropped to the range.
+
+    With a ``limit``, at most ``limit + 1`` periods are made: enough for the caller to see
+    that the range is too long, without the cost of cutting all of it.
+    """
     if by == "shift":
-        return calendar.periods(since, until)
+        return calendar.periods(since, until, limit)
     if by == "day":
-        return _days(since, until, calendar.zone)
+        return _days(since, until, calendar.zone, limit)
     if by in _STEP:
-        return _clock(since, until, calendar.zone, by)
+        return _clock(since, until, calendar.zone, by, limit)
     raise ValueError(f"by must be one of {', '.join(PERIOD_KINDS)}, got {by!r}")
 
 
-def _days(since: datetime, until: datetime, zone: ZoneInfo) -> list[Period]:
+def _full(out: list[Period], limit: int | None) -> bool:
+    return limit is not None and len(out) > limit
+
+
+def _days(since: datetime, until: datetime, zone: ZoneInfo, limit: int | None = None
+          ) -> list[Period]:
     out: list[Period] = []
     day = since.astimezone(zone).date()
-    while True:
+    while not _full(out, limit):
         start = datetime.combine(day, time(0), tzinfo=zone).astimezone(UTC)
         end = datetime.combine(day + timedelta(days=1), time(0), tzinfo=zone).astimezone(UTC)
         if start >= until:
@@ -44,6 +55,7 @@ def _days(since: datetime, until: datetime, zone: ZoneInfo) -> list[Period]:
         if end > since:
             out.append(Period(day.isoformat(), "day", day, max(start, since), min(end, until)))
         day += timedelta(days=1)
+    return out
 
 
 def _floor(moment: datetime, zone: ZoneInfo, by: str) -> datetime:
@@ -53,10 +65,11 @@ def _floor(moment: datetime, zone: ZoneInfo, by: str) -> datetime:
     return local.replace(minute=minute, second=0, microsecond=0).astimezone(UTC)
 
 
-def _clock(since: datetime, until: datetime, zone: ZoneInfo, by: str) -> list[Period]:
+def _clock(since: datetime, until: datetime, zone: ZoneInfo, by: str,
+           limit: int | None = None) -> list[Period]:
     out: list[Period] = []
     start = _floor(since, zone, by)
-    while start < until:
+    while start < until and not _full(out, limit):
         end = _floor(start + _STEP[by], zone, by)
         if end <= start:  # a zone whose offset change is not on the grid
             end = start + _STEP[by]
@@ -71,17 +84,22 @@ def parse_bound(text: str, calendar: ShiftCalendar, *, upper: bool) -> datetime:
     """A range bound as typed: an ISO date (local midnight), an ISO date-time (local when it
     has no offset) or a shift id (its start; its end when ``upper``)."""
     value = text.strip()
-    if "/" in value:
-        instance = calendar.parse_id(value)
-        return instance.end if upper else instance.start
-    zone = calendar.zone
     try:
+        if "/" in value:
+            instance = calendar.parse_id(value)
+            return instance.end if upper else instance.start
+        zone = calendar.zone
         if _DATE.match(value):
             return datetime.combine(date.fromisoformat(value), time(0), tzinfo=zone).astimezone(UTC)
         moment = datetime.fromisoformat(value)
-    except ValueError:
+        if moment.tzinfo is None:
+            moment = moment.replace(tzinfo=zone)
+        return moment.astimezone(UTC)
+    except OverflowError:  # year 1 or 9999 shifted by the zone's offset
+        raise ValueError(f"{text[:40]!r} is outside the times the log can hold "
+                         f"({TIME_RANGE_TEXT})") from None
+    except ValueError as error:
+        if "/" in value:
+            raise
         raise ValueError(f"expected a date (2026-11-21), a date-time (2026-11-21T06:00) or a "
-                         f"shift id (2026-11-21/night), got {text!r}") from None
-    if moment.tzinfo is None:
-        moment = moment.replace(tzinfo=zone)
-    return moment.astimezone(UTC)
+                         f"shift id (2026-11-21/night), got {text[:40]!r}") from error

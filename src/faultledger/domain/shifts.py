@@ -123,12 +123,15 @@ class ShiftCalendar(BaseModel):
             day += timedelta(days=1)
         return sorted(found, key=lambda i: i.start)
 
-    def periods(self, since: datetime, until: datetime) -> list[Period]:
+    def periods(self, since: datetime, until: datetime, limit: int | None = None
+                ) -> list[Period]:
         """[since, until) cut into shift instances and the unscheduled gaps between them,
-        each cropped to the range."""
+        each cropped to the range; with a ``limit``, stops after ``limit + 1`` periods."""
         out: list[Period] = []
         cursor = since
         for inst in self.instances(since, until):
+            if limit is not None and len(out) > limit:
+                return out
             start, end = max(inst.start, since), min(inst.end, until)
             if start > cursor:
                 out.append(Period(UNSCHEDULED, UNSCHEDULED, None, cursor, start))

@@ -2,27 +2,44 @@
 
 from __future__ import annotations
 
+import math
 import re
+from datetime import datetime
 
+from faultledger.domain.clock import MAX_NS, MIN_NS, TIME_RANGE_TEXT, in_range, to_ns
 from faultledger.domain.types import EventType
 
 MAX_FAULT_CODE_LENGTH = 128
 MAX_DESCRIPTION_LENGTH = 4096
 MAX_SOURCE_ID_LENGTH = 1024
 MAX_ACTOR_LENGTH = 256
+MIN_INTEGER, MAX_INTEGER = -(2**63), 2**63 - 1
+"""What an integer field may hold: a signed 64-bit column in every database we support."""
 
 _INVALID_CHAR = re.compile(r"[^A-Za-z0-9_.\-]")
 
 
+def shown(value: object, limit: int = 60) -> str:
+    """A value quoted in a message: its repr (control characters escaped), clipped, so a huge
+    or hostile input never makes a huge or multi-line message."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}…(+{len(text) - limit} chars)"
+
+
 def fault_code_error(fault_code: str) -> str | None:
+    if not isinstance(fault_code, str):
+        return f"fault_code must be a string, got {type(fault_code).__name__}"
     if not fault_code:
         return "fault_code cannot be empty"
     if len(fault_code) > MAX_FAULT_CODE_LENGTH:
         return f"fault_code exceeds maximum length of {MAX_FAULT_CODE_LENGTH}"
     bad = _INVALID_CHAR.search(fault_code)
     if bad is not None:
+        char = bad.group()
+        if not char.isprintable():  # quoted as an escape, never as the raw control character
+            char = repr(char)[1:-1]
         return (
-            f"fault_code contains invalid character '{bad.group()}'. "
+            f"fault_code contains invalid character '{char}'. "
             "Only alphanumeric, underscore, hyphen, and dot are allowed"
         )
     if ".." in fault_code:
@@ -42,13 +59,62 @@ def parse_event_type(event_type: object) -> EventType | None:
 
 
 def text_error(name: str, value: str, limit: int) -> str | None:
-    """Length bound and UTF-8 encodability (lone surrogates come from undecodable argv bytes)."""
+    """Type, length bound, UTF-8 encodability (lone surrogates come from undecodable argv
+    bytes) and no NUL: a NUL cannot travel faithfully through ROS strings or C tools (they
+    end the text there), so it is refused rather than stored as something else later shows
+    truncated. Other control characters are stored as given and shown escaped."""
+    if not isinstance(value, str):
+        return f"{name} must be a string, got {type(value).__name__}"
     if len(value) > limit:
         return f"{name} exceeds maximum length of {limit} (got {len(value)})"
     try:
         value.encode("utf-8")
     except UnicodeEncodeError:
         return f"{name} is not valid UTF-8 text"
+    nul = value.find("\x00")
+    if nul >= 0:
+        return f"{name} contains a NUL character (\\x00) at position {nul}"
+    return None
+
+
+def severity_error(kind: EventType, severity: object) -> str | None:
+    """0..3 on FAILED; on PASSED medkit does not check it, but it is stored, so it must be a
+    whole number a database column can hold (not NaN, a float or a string)."""
+    whole = isinstance(severity, int) and not isinstance(severity, bool)
+    if kind is EventType.FAILED:
+        if whole and 0 <= severity <= 3:  # type: ignore[operator]
+            return None
+        return f"severity must be 0 (INFO) to 3 (CRITICAL), got {shown(severity)}"
+    if whole and MIN_INTEGER <= severity <= MAX_INTEGER:  # type: ignore[operator]
+        return None
+    return f"severity must be a whole number, got {shown(severity)}"
+
+
+def time_error(name: str, moment: object) -> str | None:
+    """A time the log can hold: timezone-aware, within MIN_NS..MAX_NS."""
+    if not isinstance(moment, datetime):
+        return f"{name} must be a timezone-aware datetime, got {type(moment).__name__}"
+    try:
+        ns = to_ns(moment)
+    except (ValueError, OverflowError):
+        return f"{name} must be a timezone-aware datetime (with a UTC offset), got {moment!r}"
+    return None if in_range(ns) else range_message(name, moment.isoformat())
+
+
+def ns_error(name: str, value: object) -> str | None:
+    """A time given as integer nanoseconds since the epoch."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        return f"{name} must be nanoseconds since the epoch, got {shown(value)}"
+    return None if MIN_NS <= value <= MAX_NS else range_message(name, f"{value} ns")
+
+
+def range_message(name: str, given: str) -> str:
+    return f"{name} {given} is outside the times the log can hold ({TIME_RANGE_TEXT})"
+
+
+def finite_error(name: str, value: object) -> str | None:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return f"{name} must be a finite number, got {shown(value)}"
     return None
 
 
@@ -61,12 +127,11 @@ def report_error(
         return problem
     kind = parse_event_type(event_type)
     if kind is None:
-        return f"event_type must be FAILED (0) or PASSED (1), got {event_type!r}"
-    if kind is EventType.FAILED and (
-        isinstance(severity, bool) or not isinstance(severity, int) or not 0 <= severity <= 3
-    ):
-        return f"severity must be 0 (INFO) to 3 (CRITICAL), got {severity!r}"
-    if not source_id:
+        return f"event_type must be FAILED (0) or PASSED (1), got {shown(event_type)}"
+    problem = severity_error(kind, severity)
+    if problem:
+        return problem
+    if isinstance(source_id, str) and not source_id:
         return "source_id cannot be empty"
     return text_error("source_id", source_id, MAX_SOURCE_ID_LENGTH) or text_error(
         "description", description, MAX_DESCRIPTION_LENGTH
@@ -82,6 +147,6 @@ def clear_error(fault_code: str, actor: str, reason: str) -> str | None:
 
 
 def entity_error(entity_id: str) -> str | None:
-    if not entity_id:
+    if isinstance(entity_id, str) and not entity_id:
         return "entity_id cannot be empty"
     return text_error("entity_id", entity_id, MAX_SOURCE_ID_LENGTH)

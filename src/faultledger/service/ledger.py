@@ -46,7 +46,7 @@ from faultledger.service.writer import (
     Report,
     Writer,
 )
-from faultledger.store import event_log, migrate, projections, stat_tables
+from faultledger.store import event_log, integrity_check, migrate, projections, stat_tables
 from faultledger.store.database import Database
 
 log = logging.getLogger(__name__)
@@ -177,14 +177,14 @@ class FaultLedger:
     def clear(self, fault_code: str, actor: str = "api", reason: str = "",
               at: datetime | None = None) -> ClearResult:
         problem = validation.clear_error(fault_code, actor, reason)
+        if problem is None and at is not None:
+            problem = validation.time_error("at", at)
         if problem is not None:
             return ClearResult(False, problem)
+        occurred_ns = time.time_ns() if at is None else to_ns(at)
         try:
-            occurred_ns = time.time_ns() if at is None else to_ns(at)
             result: ClearResult = self._writer.submit(
                 Clear(FaultCleared(fault_code, actor, reason), occurred_ns))
-        except ValueError:
-            return ClearResult(False, "at must be a timezone-aware datetime")
         except FaultLedgerError as error:
             return ClearResult(False, str(error))
         return result
@@ -285,12 +285,9 @@ class FaultLedger:
         An episode still open ends at ``as_of`` (default now), as in ``stats``; episodes
         with no time inside the range (0 s, or starting after ``as_of``) are left out.
         """
-        try:
-            since_ns, until_ns = to_ns(since), to_ns(until)
-            as_of_ns = time.time_ns() if as_of is None else to_ns(as_of)
-        except (ValueError, TypeError, AttributeError):
-            raise InvalidInputError("since, until and as_of must be timezone-aware datetimes"
-                                    ) from None
+        since_ns, until_ns = _aware_ns(since, "since"), _aware_ns(until, "until")
+        as_of_ns = time.time_ns() if as_of is None else _aware_ns(as_of, "as_of")
+        _check_limit(limit)
         if since_ns >= until_ns:
             raise InvalidInputError("since must be before until")
         with self._db.reading() as conn:
@@ -313,9 +310,10 @@ class FaultLedger:
 
     def state_at(self, when: datetime | int) -> list[Fault]:
         """Faults (any status) after the log prefix up to seq ``when``, or recorded by a time."""
+        upto = _seq(when, "when") if isinstance(when, int) else _aware_ns(when, "when")
         with self._db.reading() as conn:
-            upto = when if isinstance(when, int) else event_log.last_seq_recorded_by(
-                conn, to_ns(when))
+            if not isinstance(when, int):
+                upto = event_log.last_seq_recorded_by(conn, upto)
             projector = Projector()
             projector.apply_all(event_log.read(conn, upto_seq=upto))
         return sorted(projector.committed(), key=lambda f: f.fault_code)
@@ -327,9 +325,14 @@ class FaultLedger:
         starting from the stored hash of record ``from_seq - 1``: whoever trusts that one hash
         (anchored elsewhere, or covered by an earlier check) needs nothing before it. The
         checkpoint is compared when the segment holds its seq; projections are not replayed.
+        The whole-log check also runs the database's own integrity check (SQLite); a segment
+        does not (it reads only its records).
         """
         if from_seq is not None or to_seq is not None:
             return _verify_segment(self._db, 1 if from_seq is None else from_seq, to_seq)
+        return _with_storage_damage(self._db, self._verify_log)
+
+    def _verify_log(self) -> VerifyReport:
         with self._db.reading() as conn:
             chain = event_log.check_chain(conn)
             checkpoint = projections.load_checkpoint(conn)
@@ -402,10 +405,12 @@ class FaultLedger:
 
 
 def _event_id_error(event_id: str) -> str | None:
+    if not isinstance(event_id, str) or len(event_id) > 64:
+        return f"event_id must be a UUID, got {validation.shown(event_id)}"
     try:
         uuid.UUID(event_id)
-    except (ValueError, TypeError, AttributeError):
-        return f"event_id must be a UUID, got {event_id!r}"
+    except ValueError:
+        return f"event_id must be a UUID, got {validation.shown(event_id)}"
     return None
 
 
@@ -508,19 +513,24 @@ def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -
 
 
 def _report_command(request: ReportRequest) -> Report | ReportResult:
-    """The writer's command for a valid report, else the rejection naming the problem."""
+    """The writer's command for a valid report, else the rejection naming the problem.
+
+    Every field is checked here, before the report joins a group commit: one bad report must
+    never fail the commit it would share with valid ones (the writer isolates one that
+    still does, as a last resort).
+    """
+    if not isinstance(request, ReportRequest):
+        return ReportResult(False, f"expected a ReportRequest, got {type(request).__name__}")
     kind = validation.parse_event_type(request.event_type)
     problem = validation.report_error(request.fault_code, request.event_type, request.severity,
                                       request.description, request.source_id)
     if problem is None and request.event_id is not None:
         problem = _event_id_error(request.event_id)
-    try:
-        occurred_ns = time.time_ns() if request.at is None else to_ns(request.at)
-    except (ValueError, TypeError, AttributeError):
-        problem = problem or "at must be a timezone-aware datetime"
-        occurred_ns = 0
+    if problem is None and request.at is not None:
+        problem = validation.time_error("at", request.at)
     if problem is not None or kind is None:
         return ReportResult(False, problem or "invalid report")
+    occurred_ns = time.time_ns() if request.at is None else to_ns(request.at)
     event = FaultReported(request.fault_code, kind, request.severity, request.description,
                           request.source_id)
     return Report(event, occurred_ns, request.event_id or str(uuid.uuid4()),
@@ -555,6 +565,7 @@ def seq_recorded_by(ledger: FaultLedger, when: datetime | int) -> int:
     verified: a seq is checked against the log, a time maps to the records recorded by it."""
     with ledger._db.reading() as conn:
         if isinstance(when, int):
+            when = _seq(when, "seq")
             head_seq = event_log.head(conn)[0]
             if not 0 <= when <= head_seq:
                 raise InvalidInputError(f"seq {when} is not in the log (seq 0..{head_seq})")
@@ -581,6 +592,22 @@ def seqs_recorded_between(ledger: FaultLedger, since: datetime | None,
         raise InvalidInputError(f"no record of the log (seq 1..{head_seq}) was recorded within "
                                 f"{window}")
     return start, end
+
+
+def _with_storage_damage(db: Database, check: Callable[[], VerifyReport]) -> VerifyReport:
+    """``check`` after the database's own integrity check; damage fails the report. A damaged
+    file may also break the check itself: then the damage and that error are the report."""
+    with db.reading() as conn:
+        damage = integrity_check.storage_damage(conn)
+    if not damage:
+        return check()
+    try:
+        report = check()
+    except Exception as error:  # any failure reading a file known to be damaged
+        return VerifyReport(False, 0, 0, "", None,
+                            [*damage, f"the log could not be checked: {error}"])
+    return VerifyReport(False, report.records, report.head_seq, report.head_hash,
+                        report.first_bad_seq, [*damage, *report.problems])
 
 
 def _verify_segment(db: Database, from_seq: int, to_seq: int | None) -> VerifyReport:
@@ -623,10 +650,21 @@ def _record_filter(code: str | None, since: datetime | int | None, until: dateti
     wanted = (kinds,) if isinstance(kinds, str) else tuple(kinds)
     unknown = [kind for kind in wanted if kind not in KINDS]
     if unknown:
-        raise InvalidInputError(f"unknown record kind {', '.join(map(repr, unknown))}; valid "
+        named = ", ".join(validation.shown(kind, 40) for kind in unknown[:5])
+        raise InvalidInputError(f"unknown record kind {named}; valid "
                                 f"kinds: {', '.join(KINDS)}")
     patterns = (codes,) if isinstance(codes, str) else tuple(codes or ())
+    if len(patterns) > statistics.MAX_PATTERNS:
+        raise InvalidInputError(f"codes takes at most {statistics.MAX_PATTERNS} patterns")
+    for name, value, size in (*(("a code pattern", c, statistics.MAX_PATTERN_LENGTH)
+                                for c in patterns),
+                              ("code", code, validation.MAX_FAULT_CODE_LENGTH),
+                              ("source", source, validation.MAX_SOURCE_ID_LENGTH)):
+        problem = None if value is None else validation.text_error(name, value, size)
+        if problem:
+            raise InvalidInputError(problem)
     _check_seq_range(from_seq, to_seq)
+    _check_limit(limit)
     return event_log.RecordFilter(
         fault_code=code, source_id=source, since_ns=_bound_ns(since, "since"),
         until_ns=_bound_ns(until, "until"), kinds=wanted, limit=limit, codes=patterns,
@@ -634,10 +672,24 @@ def _record_filter(code: str | None, since: datetime | int | None, until: dateti
     )
 
 
+def _check_limit(limit: int | None) -> None:
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int)
+                              or not 0 <= limit <= validation.MAX_INTEGER):
+        raise InvalidInputError(f"limit must be a whole number of 0 or more, got "
+                                f"{validation.shown(limit)}")
+
+
+def _seq(value: int, name: str) -> int:
+    if isinstance(value, bool) or not 0 <= value <= validation.MAX_INTEGER:
+        raise InvalidInputError(f"{name} must be a seq number of 0 or more, got "
+                                f"{validation.shown(value)}")
+    return value
+
+
 def _check_seq_range(from_seq: int | None, to_seq: int | None) -> None:
     for name, value in (("from_seq", from_seq), ("to_seq", to_seq)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int)
-                                  or value < 1):
+                                  or not 1 <= value <= validation.MAX_INTEGER):
             raise InvalidInputError(f"{name} must be a seq number of 1 or more, got {value!r}")
     if from_seq is not None and to_seq is not None and from_seq > to_seq:
         raise InvalidInputError(f"from_seq {from_seq} is after to_seq {to_seq}: the range is "
@@ -645,12 +697,19 @@ def _check_seq_range(from_seq: int | None, to_seq: int | None) -> None:
 
 
 def _bound_ns(moment: datetime | int | None, name: str) -> int | None:
-    return moment if moment is None or isinstance(moment, int) else _aware_ns(moment, name)
+    if moment is None:
+        return None
+    if isinstance(moment, int) and not isinstance(moment, bool):
+        problem = validation.ns_error(name, moment)
+        if problem:
+            raise InvalidInputError(problem)
+        return moment
+    return _aware_ns(moment, name)
 
 
 def _aware_ns(moment: datetime, name: str) -> int:
-    try:
-        return to_ns(moment)
-    except (ValueError, TypeError, AttributeError):
-        raise InvalidInputError(f"{name} must be a timezone-aware datetime, got "
-                                f"{moment!r}") from None
+    """A datetime argument as nanoseconds; InvalidInputError unless the log can hold it."""
+    problem = validation.time_error(name, moment)
+    if problem:
+        raise InvalidInputError(problem)
+    return to_ns(moment)

@@ -274,7 +274,12 @@ class Writer:
         self._connection.close()
 
     def _commit(self, group: list[_Pending]) -> None:
-        """Commit one group; after a concurrent append by another process, retry once."""
+        """Commit one group; after a concurrent append by another process, retry once.
+
+        Commands are validated before they are queued, so a group should never fail because
+        of one of them; should one still raise something unexpected, every command of the
+        group is committed alone, so only the culprit fails (isolation as a last resort).
+        """
         try:
             try:
                 batch = self._write(group)
@@ -286,9 +291,17 @@ class Writer:
             self._fail(group, error)
             return
         except Exception as error:  # a bug must not leave callers waiting forever
-            log.exception("commit failed on a batch of %d commands", len(group))
             self._head = None
-            self._fail(group, StoreError(f"internal error while writing: {error!r}"))
+            if len(group) > 1:
+                log.warning("commit of %d commands failed (%s); committing each alone",
+                            len(group), clipped(error))
+                for pending in group:
+                    self._commit([pending])
+                return
+            log.error("command %s failed: %s", type(group[0].command).__name__,
+                      clipped(error))
+            log.debug("command failed", exc_info=True)
+            self._fail(group, StoreError(f"internal error while writing: {clipped(error)}"))
             return
         self.commits += 1
         if batch.notifications:
@@ -413,6 +426,12 @@ class Writer:
         seq = batch.add(event, command.occurred_ns, command.event_id)
         known.add(command.event_id)
         return ReportResult(True, f"recorded as seq {seq}", seq, command.event_id)
+
+
+def clipped(error: BaseException, limit: int = 300) -> str:
+    """An unexpected error as one bounded log/answer line: type, message, no traceback."""
+    text = repr(f"{type(error).__name__}: {error}")[1:-1]
+    return text if len(text) <= limit else f"{text[:limit]}…(+{len(text) - limit} chars)"
 
 
 def _split_exclusive(batch: list[_Pending]) -> list[list[_Pending]]:
