@@ -1,5 +1,6 @@
 """A scripted two-night scenario for the `stats` and `report-shift` CLI tests: e-stop presses,
-a lidar timeout and an overheating motor at explicit Europe/Berlin times, on a real SQLite file.
+a lidar timeout, an overheating motor and action goals that end (aborted, canceled,
+succeeded) at explicit Europe/Berlin times, on a real SQLite file.
 """
 
 from __future__ import annotations
@@ -66,6 +67,27 @@ EPISODES: list[tuple[str, datetime, float | None, int, str]] = [
 ]
 
 
+NAV, PICK = "/nav/navigate_to_pose", "/arm/pick"
+# (action, goal id, terminal status, at, action server node)
+GOALS: list[tuple[str, str, str, datetime, str]] = [
+    (NAV, "prev-1", "ABORTED", berlin(20, 23, 0), "/bt_navigator"),
+    (NAV, "prev-2", "SUCCEEDED", berlin(21, 1, 0), "/bt_navigator"),
+    (NAV, "night-1", "ABORTED", berlin(21, 22, 40), "/bt_navigator"),
+    (NAV, "night-2", "ABORTED", berlin(21, 22, 41, 30), "/bt_navigator"),
+    (NAV, "night-3", "ABORTED", berlin(22, 3, 15), "/bt_navigator"),
+    (PICK, "night-4", "CANCELED", berlin(22, 4, 5), "/arm_server"),
+    (PICK, "night-5", "SUCCEEDED", berlin(22, 4, 20), "/arm_server"),
+    (PICK, "morning-1", "ABORTED", berlin(22, 7, 0), "/arm_server"),
+]
+
+
+def goals(since: datetime, until: datetime, status: str = "ABORTED",
+          action: str | None = None) -> int:
+    """Goal outcomes of the script in [since, until) with that status (and action)."""
+    return sum(1 for name, _, end, at, _ in GOALS
+               if since <= at < until and end == status and action in (None, name))
+
+
 def presses(since: datetime, until: datetime, glob: str = "*") -> int:
     """FAILED reports of the script in [since, until) whose code matches ``glob``; each one
     is an activation and a confirmation (every episode is healed before the next)."""
@@ -101,6 +123,11 @@ def build(tmp_path: Path) -> Scenario:
             if held is not None:
                 assert ledger.report(code, "PASSED", 0, "", source,
                                      at=at + timedelta(seconds=held)).accepted
+        for action, goal_id, status, at, server in GOALS:
+            assert ledger.record_goal_outcome(action, goal_id, status, server, at=at).accepted
+        again = ledger.record_goal_outcome(NAV, "night-1", "ABORTED", "/bt_navigator",
+                                           at=berlin(21, 22, 50))
+        assert again.duplicate  # a republished status: counted once
     return Scenario(url, shifts, load_shift_calendar(shifts))
 
 

@@ -21,6 +21,7 @@ from faultledger.domain.events import (
     FaultCleared,
     FaultConfirmedByTimer,
     FaultReported,
+    GoalOutcome,
     LogRecord,
     ReclassifiedOnStartup,
 )
@@ -38,9 +39,11 @@ FLOOD_LIMIT = 10
 
 COUNTS = ("failed_reports", "passed_reports", "activations", "occurrences", "confirmations",
           "heals", "clears")
+GOAL_COUNTS = {"ABORTED": "aborted_goals", "CANCELED": "canceled_goals",
+               "SUCCEEDED": "succeeded_goals"}
 FIGURES = (*COUNTS, "active_seconds", "repairs", "mttr_seconds", "mtbf_seconds",
            "confirmations_per_10min", "flood_windows", "flood_seconds", "flood_percent",
-           "chattering_codes", "stale_codes", "top10_share")
+           "chattering_codes", "stale_codes", "top10_share", *GOAL_COUNTS.values())
 
 
 # -- facts and episodes ---------------------------------------------------------------------------
@@ -78,10 +81,22 @@ class Episode:
         return as_of_ns if self.end_ns is None else self.end_ns
 
 
+@dataclass(frozen=True)
+class Goal:
+    """One stored goal outcome record: the terminal status of one action goal."""
+
+    seq: int
+    at_ns: int
+    action: str
+    status: str
+    server_node: str
+
+
 @dataclass
 class Folded:
     facts: list[Fact] = field(default_factory=list)
     episodes: list[Episode] = field(default_factory=list)
+    goals: list[Goal] = field(default_factory=list)
 
 
 def _source(record: LogRecord) -> str:
@@ -109,10 +124,22 @@ def fold(records: Iterable[LogRecord]) -> Folded:
         code = record.fault_code
         before = projector.get(code) if code is not None else None
         projector.apply(record)
+        if isinstance(record.event, GoalOutcome):  # counted as it is, touches no fault
+            goal = record.event
+            out.goals.append(Goal(record.seq, record.occurred_at_ns, goal.action, goal.status,
+                                  goal.server_node))
+            continue
         if code is None:  # policy_changed
             continue
         after = projector.get(code)
-        if after is None:
+        event = record.event
+        if after is None:  # a PASSED for a fault that does not exist: logged, counted
+            if isinstance(event, FaultReported):
+                previous_report_failed[code] = False
+                out.facts.append(Fact(record.seq, record.occurred_at_ns, code, _source(record),
+                                      event.severity, failed_report=False, passed_report=True,
+                                      activation=False, occurrence=False, confirmation=False,
+                                      heal=False, clear=False, chattering=False))
             continue
         was = None if before is None else before.status
         now = after.status
@@ -262,8 +289,8 @@ def _group_of(item: Fact | Episode, group_by: Sequence[str]) -> tuple[str | int,
 
 
 def figures(period: RefPeriod, facts: Sequence[Fact], episodes: Sequence[Episode],
-            as_of_ns: int) -> dict[str, Any]:
-    """Every figure of one row, from the facts and episodes of that row's group."""
+            as_of_ns: int, goals: Sequence[Goal] = ()) -> dict[str, Any]:
+    """Every figure of one row, from the facts, episodes and goals of that row's group."""
     ps, pe = period.start_ns, period.end_ns
     length = pe - ps
     inside = [f for f in facts if ps <= f.at_ns < pe]
@@ -316,12 +343,14 @@ def figures(period: RefPeriod, facts: Sequence[Fact], episodes: Sequence[Episode
             per_code[f.code] = per_code.get(f.code, 0) + 1
     top = sum(sorted(per_code.values(), reverse=True)[:10])
     row["top10_share"] = top / confirmations if confirmations else None
+    for status, name in GOAL_COUNTS.items():
+        row[name] = sum(1 for g in goals if ps <= g.at_ns < pe and g.status == status)
     return row
 
 
 def _nonzero(row: dict[str, Any]) -> bool:
-    return (any(row[name] for name in COUNTS) or row["active_seconds"] > 0
-            or row["repairs"] > 0 or row["stale_codes"] > 0)
+    return (any(row[name] for name in (*COUNTS, *GOAL_COUNTS.values()))
+            or row["active_seconds"] > 0 or row["repairs"] > 0 or row["stale_codes"] > 0)
 
 
 @dataclass(frozen=True)
@@ -335,22 +364,32 @@ def expected_rows(folded: Folded, periods: Sequence[RefPeriod], as_of: datetime,
                   codes: Sequence[str] | None = None, group_by: Sequence[str] = ()
                   ) -> list[ExpectedRow]:
     """The rows ``stats`` must return: one per period without ``group_by``; with it, one per
-    (period, group) with a non-zero figure, ordered by period start then group key."""
+    (period, group) with a non-zero figure, ordered by period start then group key.
+
+    Goal outcomes are not selected by ``codes`` (they have no code). Grouped by ``action``
+    (with or without ``source``: the server node), rows hold goal figures only; grouped by
+    fault keys only, fault figures only; ungrouped, both."""
     as_of_ns = to_ns(as_of)
-    facts = [f for f in folded.facts if _selected(f.code, codes)]
-    episodes = [e for e in folded.episodes if _selected(e.code, codes)]
-    groups: dict[tuple[str | int, ...], tuple[list[Fact], list[Episode]]] = {}
+    by_action = "action" in group_by
+    facts = [] if by_action else [f for f in folded.facts if _selected(f.code, codes)]
+    episodes = [] if by_action else [e for e in folded.episodes if _selected(e.code, codes)]
+    goals = folded.goals if by_action or not group_by else []
+    groups: dict[tuple[str | int, ...], tuple[list[Fact], list[Episode], list[Goal]]] = {}
     for f in facts:
-        groups.setdefault(_group_of(f, group_by), ([], []))[0].append(f)
+        groups.setdefault(_group_of(f, group_by), ([], [], []))[0].append(f)
     for e in episodes:
-        groups.setdefault(_group_of(e, group_by), ([], []))[1].append(e)
+        groups.setdefault(_group_of(e, group_by), ([], [], []))[1].append(e)
+    for g in goals:
+        values = {"action": g.action, "source": g.server_node}
+        goal_key: tuple[str | int, ...] = tuple(values[name] for name in group_by)
+        groups.setdefault(goal_key, ([], [], []))[2].append(g)
     if not group_by:
-        groups.setdefault((), ([], []))
+        groups.setdefault((), ([], [], []))
     out: list[ExpectedRow] = []
     for period in periods:
         for key in sorted(groups):
-            group_facts, group_episodes = groups[key]
-            row = figures(period, group_facts, group_episodes, as_of_ns)
+            group_facts, group_episodes, group_goals = groups[key]
+            row = figures(period, group_facts, group_episodes, as_of_ns, group_goals)
             if group_by and not _nonzero(row):
                 continue
             out.append(ExpectedRow(period, dict(zip(group_by, key, strict=True)), row))

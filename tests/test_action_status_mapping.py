@@ -1,4 +1,5 @@
-"""The action-status mapping without ROS: net state, fault codes, filters, transitions."""
+"""The action-status mapping without ROS: net state, fault codes, filters, transitions in both
+judgement modes, goal outcomes, settings."""
 
 from __future__ import annotations
 
@@ -17,7 +18,10 @@ from faultledger.ros.bridges.action_status_mapping import (
     STATUS_SUCCEEDED,
     STATUS_UNKNOWN,
     ActionTracker,
+    GoalOutcome,
+    Judge,
     Net,
+    RecordedGoals,
     Rules,
     SeenGoals,
     Transition,
@@ -149,9 +153,21 @@ def test_raise_on_healthy_to_failed_and_heal_on_failed_to_healthy() -> None:
     assert not tracker.failed(A)
 
 
-def test_a_retry_loop_as_a_server_publishes_it_raises_once_and_heals_once() -> None:
-    """rcl_action republishes finished goals: [A1], [A1 A2], [A1 A2 S3]."""
-    tracker = ActionTracker(Rules())
+MODES: tuple[Judge, ...] = ("whole_array", "new_goals")
+
+
+def test_whole_array_is_the_default() -> None:
+    assert Rules().judge == "whole_array"
+
+
+@pytest.mark.parametrize("judge", MODES)
+def test_a_retry_loop_as_a_server_publishes_it(judge: Judge) -> None:
+    """rcl_action republishes finished goals: [A1], [A1 A2], [A1 A2 S3], [A1 A2 S3 A4].
+
+    whole_array: raised once at the first abort; the success does not heal while the aborted
+    goals are still in the array. new_goals: the success heals at once, the next abort raises
+    again."""
+    tracker = ActionTracker(Rules(judge=judge))
     arrays = [
         [(gid(1), STATUS_ACCEPTED)],
         [(gid(1), STATUS_EXECUTING)],
@@ -161,30 +177,87 @@ def test_a_retry_loop_as_a_server_publishes_it_raises_once_and_heals_once() -> N
         [(gid(1), STATUS_ABORTED), (gid(2), STATUS_ABORTED), (gid(3), STATUS_EXECUTING)],
         [(gid(1), STATUS_ABORTED), (gid(2), STATUS_ABORTED), (gid(3), STATUS_SUCCEEDED)],
         [(gid(1), STATUS_ABORTED), (gid(2), STATUS_ABORTED), (gid(3), STATUS_SUCCEEDED)],
+        [(gid(1), STATUS_ABORTED), (gid(2), STATUS_ABORTED), (gid(3), STATUS_SUCCEEDED),
+         (gid(4), STATUS_ABORTED)],
     ]
     out = [codes(tracker.observe(A, array)) for array in arrays]
-    assert out == [[], [], [(ABORTED_CODE, False)], [], [], [], [(ABORTED_CODE, True)], []]
+    raised, healed = [(ABORTED_CODE, False)], [(ABORTED_CODE, True)]
+    if judge == "whole_array":
+        assert out == [[], [], raised, [], [], [], [], [], []]
+    else:
+        assert out == [[], [], raised, [], [], [], healed, [], raised]
 
 
-def test_two_new_goals_in_one_array_one_aborted_is_failed() -> None:
+def test_whole_array_heals_once_the_aborted_goals_leave_the_array() -> None:
+    """The server forgets finished goals after its result_timeout."""
     tracker = ActionTracker(Rules())
+    assert codes(tracker.observe(A, [(gid(1), STATUS_ABORTED)])) == [(ABORTED_CODE, False)]
+    assert tracker.observe(A, [(gid(1), STATUS_ABORTED), (gid(2), STATUS_SUCCEEDED)]) == []
+    assert tracker.failed(A)
+    assert codes(tracker.observe(A, [(gid(2), STATUS_SUCCEEDED)])) == [(ABORTED_CODE, True)]
+    assert tracker.observe(A, [(gid(2), STATUS_SUCCEEDED)]) == []
+    # Everything forgotten: an empty array changes nothing.
+    assert tracker.observe(A, []) == [] and not tracker.failed(A)
+    # A new abort while healthy is a new edge, even with the old success still remembered.
+    assert codes(tracker.observe(A, [(gid(2), STATUS_SUCCEEDED), (gid(3), STATUS_ABORTED)])) \
+        == [(ABORTED_CODE, False)]
+
+
+def test_whole_array_an_empty_array_keeps_a_failed_action_failed() -> None:
+    tracker = ActionTracker(Rules())
+    tracker.observe(A, [(gid(1), STATUS_ABORTED)])
+    assert tracker.observe(A, []) == [] and tracker.failed(A)
+
+
+@pytest.mark.parametrize("judge", MODES)
+def test_a_restarted_bridge_raises_again_for_aborted_goals_still_remembered(
+        judge: Judge) -> None:
+    """A new tracker starts healthy: the first array it gets (the server's latest, latched)
+    counts in full in both modes."""
+    array = [(gid(1), STATUS_ABORTED), (gid(2), STATUS_SUCCEEDED)]
+    before = ActionTracker(Rules(judge=judge))
+    before.observe(A, array[:1])
+    before.observe(A, array)
+    after = ActionTracker(Rules(judge=judge))
+    assert codes(after.observe(A, array)) == [(ABORTED_CODE, False)]
+
+
+def test_new_goals_a_republished_array_judges_nothing() -> None:
+    tracker = ActionTracker(Rules(judge="new_goals"))
+    array = [(gid(1), STATUS_ABORTED)]
+    assert codes(tracker.observe(A, array)) == [(ABORTED_CODE, False)]
+    assert codes(tracker.observe(A, [(gid(1), STATUS_ABORTED), (gid(2), STATUS_SUCCEEDED)])) \
+        == [(ABORTED_CODE, True)]
+    # The same array again: nothing new, nothing judged (whole_array would find it failed).
+    assert tracker.observe(A, [(gid(1), STATUS_ABORTED), (gid(2), STATUS_SUCCEEDED)]) == []
+    whole = ActionTracker(Rules())
+    whole.observe(A, [(gid(2), STATUS_SUCCEEDED)])
+    assert codes(whole.observe(A, [(gid(1), STATUS_ABORTED), (gid(2), STATUS_SUCCEEDED)])) \
+        == [(ABORTED_CODE, False)]
+
+
+@pytest.mark.parametrize("judge", MODES)
+def test_two_new_goals_in_one_array_one_aborted_is_failed(judge: Judge) -> None:
+    tracker = ActionTracker(Rules(judge=judge))
     out = tracker.observe(A, [(gid(2), STATUS_SUCCEEDED), (gid(1), STATUS_ABORTED)])
     assert codes(out) == [(ABORTED_CODE, False)]
 
 
-def test_non_terminal_empty_and_invalid_arrays_change_nothing() -> None:
-    tracker = ActionTracker(Rules())
+@pytest.mark.parametrize("judge", MODES)
+def test_non_terminal_empty_and_invalid_arrays_change_nothing(judge: Judge) -> None:
+    tracker = ActionTracker(Rules(judge=judge))
     assert tracker.observe(A, [(gid(1), STATUS_ABORTED)]) != []
     for array in ([], [(gid(2), 42)], [(gid(3), STATUS_EXECUTING)], [(gid(4), STATUS_UNKNOWN)]):
         assert tracker.observe(A, array) == []
         assert tracker.failed(A)
 
 
-def test_canceled_is_healthy_unless_it_is_a_fault() -> None:
-    tracker = ActionTracker(Rules())
+@pytest.mark.parametrize("judge", MODES)
+def test_canceled_is_healthy_unless_it_is_a_fault(judge: Judge) -> None:
+    tracker = ActionTracker(Rules(judge=judge))
     tracker.observe(A, [(gid(1), STATUS_ABORTED)])
     assert codes(tracker.observe(A, [(gid(2), STATUS_CANCELED)])) == [(ABORTED_CODE, True)]
-    strict = ActionTracker(Rules(canceled_is_fault=True, severity=3))
+    strict = ActionTracker(Rules(canceled_is_fault=True, severity=3, judge=judge))
     [failed] = strict.observe(A, [(gid(1), STATUS_CANCELED)])
     assert (failed.code, failed.severity) == (CANCELED_CODE, 3)
     # A new kind of failure while failed is its own edge; healing heals both.
@@ -231,23 +304,105 @@ def test_seen_goals_is_a_bounded_lru() -> None:
     assert SeenGoals(0).capacity == 1
 
 
+# -- goal outcomes ---------------------------------------------------------------------------------
+def test_each_goal_is_recorded_once_across_republished_arrays() -> None:
+    recorded = RecordedGoals(100)
+    arrays = [
+        [(gid(1), STATUS_EXECUTING)],
+        [(gid(1), STATUS_ABORTED)],
+        [(gid(1), STATUS_ABORTED), (gid(2), STATUS_ACCEPTED)],
+        [(gid(1), STATUS_ABORTED), (gid(2), STATUS_SUCCEEDED), (gid(3), STATUS_CANCELED),
+         (gid(4), 42), (gid(5), STATUS_CANCELING)],
+        [(gid(1), STATUS_ABORTED), (gid(2), STATUS_SUCCEEDED), (gid(3), STATUS_CANCELED)],
+    ]
+    out = [recorded.new_outcomes(A, array, received_ns=100 + i) for i, array in enumerate(arrays)]
+    assert out == [
+        [],
+        [GoalOutcome(A, goal_text(gid(1)), "ABORTED", 101)],  # when the end was first seen
+        [],
+        [GoalOutcome(A, goal_text(gid(2)), "SUCCEEDED", 103),
+         GoalOutcome(A, goal_text(gid(3)), "CANCELED", 103)],
+        [],
+    ]
+    # Outcomes are per action: the same goal id on another action is another goal.
+    assert [o.action for o in recorded.new_outcomes("/other", arrays[1], 7)] == ["/other"]
+    assert len(recorded) == 4
+
+
+def test_recorded_goals_is_a_bounded_lru() -> None:
+    recorded = RecordedGoals(2)
+    assert len(recorded.new_outcomes(A, [(gid(1), STATUS_ABORTED)], 0)) == 1
+    assert len(recorded.new_outcomes(A, [(gid(2), STATUS_ABORTED)], 0)) == 1
+    assert recorded.new_outcomes(A, [(gid(1), STATUS_ABORTED)], 0) == []  # refreshed
+    assert len(recorded.new_outcomes(A, [(gid(3), STATUS_ABORTED)], 0)) == 1  # evicts 2
+    # Forgotten: sent again (the manager stores a goal's outcome once anyway).
+    assert len(recorded.new_outcomes(A, [(gid(2), STATUS_ABORTED)], 0)) == 1
+    assert RecordedGoals(0).capacity == 1
+
+
 def test_settings_defaults_are_the_documented_ones() -> None:
     pytest.importorskip("rclpy")
     from faultledger.ros.bridges.action_status import Settings
 
     assert Settings().model_dump() == {
         "rescan_period_sec": 2.0, "code_prefix": "ACTION", "aborted_severity": 2,
-        "canceled_is_fault": False, "heal_on_succeeded": True, "exclude_actions": [],
-        "include_only_actions": [], "dedup_capacity": 4096,
+        "canceled_is_fault": False, "heal_on_succeeded": True, "judge": "whole_array",
+        "exclude_actions": [], "include_only_actions": [], "dedup_capacity": 4096,
     }
     from faultledger.ros.bridges.settings import normalise
 
     warnings: list[str] = []
-    settings = normalise(Settings, {"code_prefix": "NAV..X", "aborted_severity": 7,
-                                    "rescan_period_sec": 0.5}, warnings.append)
-    assert (settings.code_prefix, settings.aborted_severity, settings.rescan_period_sec) == \
-        ("ACTION", 2, 0.5)
+    settings = normalise(Settings, {"code_prefix": "NAV", "aborted_severity": 7,
+                                    "rescan_period_sec": 0.5, "judge": "newest"},
+                         warnings.append)
+    assert (settings.code_prefix, settings.aborted_severity, settings.rescan_period_sec,
+            settings.judge) == ("NAV", 2, 0.5, "whole_array")
     assert len(warnings) == 2
+    assert normalise(Settings, {"judge": "new_goals"}, warnings.append).judge == "new_goals"
+
+
+@pytest.mark.parametrize("prefix, converted", [
+    ("acc-d", "ACC_D"),
+    ("Nav Stack", "NAV_STACK"),
+    ("navStack", "NAV_STACK"),
+    ("nav", "NAV"),
+    ("NAV..X", "NAV_X"),
+    ("_R2_", "R2"),
+])
+def test_a_code_prefix_not_in_upper_snake_case_is_converted_with_a_warning(
+        prefix: str, converted: str) -> None:
+    pytest.importorskip("rclpy")
+    from faultledger.ros.bridges.action_status import Settings
+    from faultledger.ros.bridges.settings import normalise
+
+    warnings: list[str] = []
+    settings = normalise(Settings, {"code_prefix": prefix}, warnings.append, "action_status")
+    assert settings.code_prefix == converted
+    assert warnings == [f"action_status.code_prefix={prefix!r} is not upper snake case; "
+                        f"using {converted!r}"]
+
+
+@pytest.mark.parametrize("prefix", ["ACTION", "NAV_STACK", "R2", "A" * 32])
+def test_an_upper_snake_code_prefix_is_kept_silently(prefix: str) -> None:
+    pytest.importorskip("rclpy")
+    from faultledger.ros.bridges.action_status import Settings
+    from faultledger.ros.bridges.settings import normalise
+
+    warnings: list[str] = []
+    assert normalise(Settings, {"code_prefix": prefix}, warnings.append).code_prefix == prefix
+    assert warnings == []
+
+
+@pytest.mark.parametrize("prefix", ["---", "", "A" * 33, 42])
+def test_a_code_prefix_without_a_usable_conversion_falls_back_to_the_default(
+        prefix: object) -> None:
+    pytest.importorskip("rclpy")
+    from faultledger.ros.bridges.action_status import Settings
+    from faultledger.ros.bridges.settings import normalise
+
+    warnings: list[str] = []
+    assert normalise(Settings, {"code_prefix": prefix}, warnings.append).code_prefix == "ACTION"
+    assert warnings and warnings[-1].startswith(f"code_prefix={prefix!r} is invalid")
 
 
 def test_the_shipped_config_holds_exactly_the_defaults() -> None:

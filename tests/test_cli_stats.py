@@ -76,8 +76,9 @@ def test_the_table_shows_the_main_figures_of_every_shift(scenario: Scenario) -> 
     for row in rows:
         cells = shown[row.period.id]
         assert cells[2:] == [
-            str(row.failed_reports), str(row.activations), str(row.confirmations),
-            str(row.heals), str(row.clears), duration(row.active_seconds),
+            str(row.failed_reports), str(row.activations), str(row.aborted_goals),
+            str(row.confirmations), str(row.heals), str(row.clears),
+            duration(row.active_seconds),
             duration(row.mttr_seconds), f"{row.flood_percent:.1f}", str(row.chattering_codes),
             str(row.stale_codes)]
     night = shown[NIGHT]

@@ -314,7 +314,8 @@ def test_event_type_accepts_name_or_wire_value(
     assert seen == expected
 
 
-def test_passed_for_unknown_fault_is_accepted_and_stores_nothing(open_ledger: OpenLedger) -> None:
+def test_passed_for_unknown_fault_is_logged_and_creates_no_fault(open_ledger: OpenLedger
+                                                                  ) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     log_length = len(ledger.history())
 
@@ -322,13 +323,17 @@ def test_passed_for_unknown_fault_is_accepted_and_stores_nothing(open_ledger: Op
 
     assert result.accepted is True
     assert ledger.get_fault(CODE) is None
-    assert len(ledger.history()) == log_length
+    [record] = ledger.history()[log_length:]
+    assert (record.seq, record.kind, record.fault_code, record.payload["event_type"]) == (
+        result.seq, "fault_reported", CODE, "PASSED")
+    assert ledger.transitions(CODE) == []
 
 
-def test_passed_for_unknown_fault_has_no_seq(open_ledger: OpenLedger) -> None:
+def test_passed_for_unknown_fault_answers_with_its_seq(open_ledger: OpenLedger) -> None:
     ledger = open_ledger(Policy(confirmation_threshold=-3))
     result = ledger.report(CODE, "PASSED", severity=0, description="", source_id="/m", at=T0)
-    assert result.seq is None
+    assert result.seq == ledger.last_seq
+    assert "changes no fault (no such fault)" in result.message
 
 
 def test_first_failed_creates_fault(open_ledger: OpenLedger) -> None:

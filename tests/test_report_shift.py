@@ -98,16 +98,16 @@ def test_key_counts_are_compared_with_the_previous_night(scenario: Scenario) -> 
         assert figures[label] == [str(now), str(then), f"{now - then:+d}",
                                   f"{(now - then) / then * 100:+.1f} %"], label
     assert figures["clears"] == ["0", "0", "±0", "-"]
-    assert figures["active time"][:2] == [duration(this.active_seconds),
+    assert figures["fault time CONFIRMED (sum)"][:2] == [duration(this.active_seconds),
                                           duration(before.active_seconds)]
     assert figures["MTTR"][:2] == [duration(this.mttr_seconds), duration(before.mttr_seconds)]
     assert this.mttr_seconds is not None and before.mttr_seconds is not None
     mttr_change = (this.mttr_seconds - before.mttr_seconds) / before.mttr_seconds * 100
     assert figures["MTTR"][3] == f"{mttr_change:+.1f} %"
     assert figures["MTBF"][:2] == [duration(this.mtbf_seconds), duration(before.mtbf_seconds)]
-    assert list(figures) == ["failed reports", "activations", "confirmations", "heals",
-                             "clears", "active time", "MTTR", "MTBF", "time in flood",
-                             "chattering codes", "stale codes"]
+    assert list(figures) == ["failed reports", "activations", "aborted goals",
+                             "confirmations", "heals", "clears", "fault time CONFIRMED (sum)",
+                             "MTTR", "MTBF", "time in flood", "chattering codes", "stale codes"]
 
 
 def test_top_offenders_are_ranked_by_activations(scenario: Scenario) -> None:

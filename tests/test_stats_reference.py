@@ -1,5 +1,6 @@
 """Statistics equal a plain fold over the raw log, for every metric, period and group
-(docs/statistics.md; SPEC §7 "Statistics must equal a recomputation from the raw log")."""
+(docs/statistics.md; SPEC §7 "Statistics must equal a recomputation from the raw log"),
+goal outcomes included, and for ranges with no end (they end at ``as_of``)."""
 
 from __future__ import annotations
 
@@ -45,6 +46,11 @@ HOUR_US = 3600 * US
 CODES = ("HW_ARM_STOP", "HW_BASE_STOP", "LIDAR_TIMEOUT", "MOTOR_OVERHEAT")
 SOURCES = ("/arm", "/base", "/sensors/lidar")
 ACTORS = ("cli:alice", "cli:bob")
+ACTIONS = ("/nav/navigate_to_pose", "/arm/pick", "/dock")
+GOAL_IDS = tuple(f"goal-{i}" for i in range(6))
+"""Few, so goals repeat: a repeat of (action, goal id) is stored once."""
+SERVERS = ("", "/bt_navigator", "/arm_server")
+GOAL_STATUSES = ("SUCCEEDED", "ABORTED", "CANCELED")
 POLICIES = (
     Policy(),
     Policy(confirmation_threshold=-3, healing_enabled=True, healing_threshold=3),
@@ -90,11 +96,14 @@ CALENDARS = {
 
 BYS = ("shift", "hour", "10min", "day")
 QUERIES: tuple[tuple[tuple[str, ...] | None, tuple[str, ...]], ...] = (
-    (None, ()),
+    (None, ()),                       # per-minute sums (+ partial minutes from facts)
+    (("*",), ()),                     # the same over facts: both paths
     (("HW_*_STOP",), ()),
     (None, ("code",)),
     (None, ("source", "severity")),
     (("HW_*_STOP", "LIDAR_*"), ("code",)),
+    (None, ("action",)),
+    (("HW_*_STOP",), ("source", "action")),
 )
 
 
@@ -131,6 +140,15 @@ class Timer:
 
 
 @dataclass(frozen=True)
+class Goal:
+    action: str
+    goal_id: str
+    status: str
+    server: str
+    when: When
+
+
+@dataclass(frozen=True)
 class Jump:
     """Move the clock to the next day (base + 24 h + offset), so episodes can become stale."""
 
@@ -152,7 +170,7 @@ class Burst:
     gap_s: int
 
 
-Op = Report | Clear | Timer | Jump | Restart | Burst
+Op = Report | Clear | Timer | Goal | Jump | Restart | Burst
 
 steps = st.one_of(
     st.integers(0, 40).map(lambda s: s * US),          # chattering range
@@ -166,7 +184,7 @@ absolutes = st.sampled_from(("clock",) * 5 + ("boundary", "anywhere")).flatmap(
 whens = st.builds(When, steps, absolutes)
 reports = st.builds(Report, st.sampled_from(CODES), st.booleans(), st.integers(0, 3),
                     st.sampled_from(SOURCES), whens)
-KINDS = ("report",) * 14 + ("clear",) * 3 + ("timer", "jump", "restart")
+KINDS = ("report",) * 14 + ("clear",) * 3 + ("goal",) * 4 + ("timer", "jump", "restart")
 """Weights of the operations (repeated branches of ``st.one_of`` would not weigh more)."""
 
 
@@ -180,6 +198,9 @@ def plain_ops(draw: st.DrawFn) -> Op:
         return draw(st.builds(Clear, st.sampled_from(CODES), st.sampled_from(ACTORS), whens))
     if kind == "timer":
         return draw(st.builds(Timer, whens))
+    if kind == "goal":
+        return draw(st.builds(Goal, st.sampled_from(ACTIONS), st.sampled_from(GOAL_IDS),
+                              st.sampled_from(GOAL_STATUSES), st.sampled_from(SERVERS), whens))
     if kind == "jump":
         return draw(st.builds(Jump, st.integers(0, 2 * HOUR_US)))
     return draw(st.builds(Restart, st.integers(0, len(POLICIES) - 1)))
@@ -235,6 +256,10 @@ def built(ops: Sequence[Op], policy: int, base: datetime) -> Iterator[tuple[Faul
                         assert result.accepted, result.message
                     elif isinstance(op, Clear):
                         ledger.clear(op.code, actor=op.actor, at=at)  # may be "not found"
+                    elif isinstance(op, Goal):
+                        result = ledger.record_goal_outcome(op.action, op.goal_id, op.status,
+                                                            op.server, at=at)
+                        assert result.accepted, result.message
                     else:
                         ledger.run_timers(at)
             yield ledger, url
@@ -253,6 +278,8 @@ class Range:
     as_of: datetime
     as_text: bool
     """Pass since/until as ISO strings with an offset instead of datetimes."""
+    open_end: bool = False
+    """Pass no until: the range ends just after ``as_of`` (``until`` = as_of + 1 µs)."""
 
 
 @st.composite
@@ -274,6 +301,11 @@ def ranges(draw: st.DrawFn) -> Range:
                                    st.integers(25 * HOUR_US, 28 * HOUR_US))))
     as_of = draw(st.one_of(st.just(until), st.just(_at(30 * HOUR_US)),
                            st.builds(_at, st.integers(0, 28 * HOUR_US))))
+    if draw(st.integers(0, 3)) == 0:  # no until: it ends at as_of, wherever that is
+        as_of = since + timedelta(microseconds=draw(st.one_of(
+            st.integers(0, 28 * HOUR_US), st.integers(0, 28 * 60).map(lambda m: m * 60 * US))))
+        return Range(base, since, as_of + timedelta(microseconds=1), as_of,
+                     draw(st.booleans()), open_end=True)
     return Range(base, since, until, as_of, draw(st.booleans()))
 
 
@@ -301,9 +333,11 @@ def without_offset(period_id: str) -> str:
 def stats(ledger: FaultLedger, by: str, calendar: Calendar, window: Range,
           codes: Sequence[str] | None, group_by: Sequence[str]) -> list[StatsRow]:
     since: datetime | str = window.since
-    until: datetime | str = window.until
+    until: datetime | str | None = window.until
     if window.as_text:
         since, until = window.since.isoformat(), window.until.isoformat()
+    if window.open_end:
+        until = None
     return ledger.stats(by=by, since=since, until=until,
                         codes=None if codes is None else list(codes), group_by=list(group_by),
                         calendar=calendar.given, as_of=window.as_of)
@@ -314,7 +348,7 @@ def _describe(by: str, calendar: str, window: Range, codes: Sequence[str] | None
     return (f"stats(by={by!r}, since={window.since.isoformat()!r}, "
             f"until={window.until.isoformat()!r}, codes={codes}, group_by={list(group_by)}, "
             f"calendar={calendar}, as_of={window.as_of.isoformat()!r}, "
-            f"as_text={window.as_text})")
+            f"as_text={window.as_text}, open_end={window.open_end})")
 
 
 def check_against_reference(ledger: FaultLedger, calendar_name: str, window: Range

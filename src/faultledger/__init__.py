@@ -9,7 +9,7 @@ from faultledger.domain.stat_rows import StatsRow
 from faultledger.domain.types import EventType, FaultStatus, NotificationType, Severity
 from faultledger.errors import FaultLedgerError
 from faultledger.service.ledger import FaultLedger, Subscription
-from faultledger.service.requests import ReportRequest
+from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
 from faultledger.service.results import ClearResult, FaultLookup, ReportResult, VerifyReport
 
 __all__ = [
@@ -20,6 +20,7 @@ __all__ = [
     "FaultLedgerError",
     "FaultLookup",
     "FaultStatus",
+    "GoalOutcomeRequest",
     "LogRecord",
     "Notification",
     "NotificationType",

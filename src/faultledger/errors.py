@@ -23,6 +23,10 @@ class NotADatabaseError(StoreError):
     pass
 
 
+class DamagedDatabaseError(StoreError):
+    """Stored content this code cannot read back (a damaged or edited file): not a bug."""
+
+
 class DatabaseReadOnlyError(StoreError):
     pass
 

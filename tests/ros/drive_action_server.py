@@ -1,9 +1,10 @@
 """A stand-in for action servers: publishes ``action_msgs/GoalStatusArray`` on
 ``/<action>/_action/status`` the way rcl_action's status publisher does.
 
-No action *type* is installed in this environment (no example_interfaces or
-action_tutorials_interfaces), so an rclpy ActionServer cannot be built; the bridge only reads the
-status topic anyway. Like a real server this process publishes RELIABLE + TRANSIENT_LOCAL with
+The bridge only reads the status topic, so publishing it by hand covers every array, including
+ones no real server would send (no action type ships with the wheels; test_goal_outcomes.py
+builds one for real rclpy ActionServers, drive_count_action.py). Like a real server this process
+publishes RELIABLE + TRANSIENT_LOCAL with
 KEEP_LAST 1, and each array carries every goal it remembers (finished goals included), stamped
 with their acceptance time.
 

@@ -19,12 +19,14 @@ class LineProcess:
     """Whether ``stop`` closes stdin first (ends the publisher scripts on EOF)."""
     stop_wait_sec = 10.0
 
-    def __init__(self, args: list[str], log: Path, *, timeout: float = 30.0) -> None:
+    def __init__(self, args: list[str], log: Path, *, timeout: float = 30.0,
+                 env: dict[str, str] | None = None) -> None:
+        """``env``: the child's whole environment (None: this process's)."""
         self.log = log
         self.timeout = timeout
         with log.open("w") as err:
             self.popen = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                          stderr=err, text=True)
+                                          stderr=err, text=True, env=env)
         self.lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self._pump, daemon=True).start()
 

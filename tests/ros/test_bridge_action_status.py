@@ -2,8 +2,10 @@
 bridge (standalone ``faultledger bridge action-status`` or inside ``faultledger serve``) and the
 fault manager; results are read from the manager's services.
 
-No action type is installed here, so the "action servers" publish GoalStatusArray on
-``/<action>/_action/status`` themselves, as rcl_action does (see drive_action_server.py).
+The "action servers" publish GoalStatusArray on ``/<action>/_action/status`` themselves, as
+rcl_action does (see drive_action_server.py), so they can also send arrays no real server would.
+Real rclpy ActionServers (with an action type built for the tests) and goal outcomes:
+test_goal_outcomes.py.
 """
 
 from __future__ import annotations
@@ -143,7 +145,8 @@ def test_standalone_bridge_turns_status_arrays_into_edges(
         assert list(fault.reporting_sources) == [source]
 
         # A retry loop as a server publishes it (finished goals stay in the array): abort,
-        # abort, succeed → one FAILED, then one PASSED.
+        # abort, succeed → one FAILED; judged on the whole array (the default), the success
+        # does not heal while the aborted goals are still in it ...
         for goal, outcome in ((1, STATUS_ABORTED), (2, STATUS_ABORTED), (3, STATUS_SUCCEEDED)):
             server.send("goals", "/robot1/follow_path", [[goal, STATUS_EXECUTING]])
             server.send("goals", "/robot1/follow_path", [[goal, outcome]])
@@ -151,6 +154,9 @@ def test_standalone_bridge_turns_status_arrays_into_edges(
                 f"action /robot1/follow_path: goal {goal_uuid(goal)} "
                 f"{'SUCCEEDED' if outcome == STATUS_SUCCEEDED else 'ABORTED'}"),
                 why=bridge.stderr)
+        wait_for(f"{path} raised", lambda: reports(client, path) == [("FAILED", source)])
+        # ... but once the server has forgotten them (its result_timeout).
+        server.send("raw", "/robot1/follow_path", [[3, STATUS_SUCCEEDED]])
         wait_for(f"{path} healed",
                  lambda: reports(client, path) == [("FAILED", source), ("PASSED", source)])
 
@@ -192,12 +198,13 @@ def test_standalone_bridge_turns_status_arrays_into_edges(
         assert bridge.stop() == 0
 
 
-def test_bridge_inside_serve_with_canceled_as_fault_and_no_healing(
+def test_bridge_inside_serve_judging_new_goals_with_canceled_as_fault_and_no_healing(
         manager: ManagerFactory, client: RosClient, tmp_path: Path) -> None:
     config = tmp_path / "serve.yaml"
     config.write_text(yaml.safe_dump({"bridges": {"action_status": {
         "enabled": True, "rescan_period_sec": 0.5, "canceled_is_fault": True,
         "heal_on_succeeded": False, "code_prefix": "NAV", "aborted_severity": 3,
+        "judge": "new_goals",  # the goals stay in the array: judged by what changed
     }}}))
     fm = manager("--config", str(config))
     server = Driver(tmp_path, "dock_server")

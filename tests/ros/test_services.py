@@ -85,6 +85,7 @@ class TestOneSharedManager:
             f"{NS}/list_faults_for_entity": "ros2_medkit_msgs/srv/ListFaultsForEntity",
             f"{NS}/get_history": "faultledger_msgs/srv/GetHistory",
             f"{NS}/report_fault_once": "faultledger_msgs/srv/ReportFaultOnce",
+            f"{NS}/report_goal_outcome": "faultledger_msgs/srv/ReportGoalOutcome",
         }
 
         def graph_complete() -> bool:

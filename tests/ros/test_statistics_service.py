@@ -43,7 +43,7 @@ AS_OF = datetime(2026, 11, 21, 12, 0, 30, 500_000, tzinfo=UTC)
 ESTOP_GLOB = "HW_*_EMERGENCY_STOP"
 FIGURES = tuple(f.name for f in fields(StatsRow) if f.name not in ("period", "group"))
 PERIOD_FIELDS = ("period_id", "period_name", "production_day", "start", "end")
-GROUP_FIELDS = ("code", "source", "severity")
+GROUP_FIELDS = ("code", "source", "severity", "action")
 BERLIN_SHIFTS = """\
 timezone: Europe/Berlin
 shifts:
@@ -94,6 +94,17 @@ def fill(ledger: FaultLedger) -> None:
     assert ledger.report("MOTOR_OVERHEAT", "FAILED", 2, "hot", "/motor/right",
                          at=utc(21, 3, 20)).accepted
     assert ledger.clear("MOTOR_OVERHEAT", actor="cli:alice", at=utc(21, 4, 15)).success
+    # Goal outcomes of two actions (what the action-status bridge records), one a duplicate.
+    outcomes = [("/nav/navigate_to_pose", "ABORTED", utc(20, 22, 30)),
+                ("/nav/navigate_to_pose", "ABORTED", utc(20, 23, 5)),
+                ("/nav/navigate_to_pose", "SUCCEEDED", utc(20, 23, 7, 30, 250_000)),
+                ("/arm/follow_joint_trajectory", "CANCELED", utc(21, 6, 1)),
+                ("/arm/follow_joint_trajectory", "SUCCEEDED", utc(21, 9, 0))]
+    for n, (action, status, at) in enumerate(outcomes):
+        server = "/nav/bt" if action.startswith("/nav/") else "/arm/controller"
+        assert ledger.record_goal_outcome(action, f"goal-{n}", status, server, at=at).accepted
+    assert ledger.record_goal_outcome("/nav/navigate_to_pose", "goal-0", "ABORTED", "/nav/bt",
+                                      at=utc(21, 10)).duplicate
     # Still CONFIRMED at as_of: an open episode.
     assert ledger.report("HW_ARM2_EMERGENCY_STOP", "FAILED", 3, "", "/arm2/estop",
                          at=utc(21, 11, 30)).accepted
@@ -155,6 +166,7 @@ def expected_row(row: StatsRow) -> dict[str, Any]:
         "code": row.group.get("code", ""),
         "source": row.group.get("source", ""),
         "severity": row.group.get("severity", -1),
+        "action": row.group.get("action", ""),
         **{name: math.nan if getattr(row, name) is None else getattr(row, name)
            for name in FIGURES},
     }
@@ -231,6 +243,8 @@ class TestStatisticsService:
         ("shift", "2026-11-20/night", "2026-11-21/morning", ["code", "source", "severity"]),
         ("10min", "2026-11-19T00:00", "2026-11-21T12:00", []),
         ("10min", "2026-11-20T22:00", "2026-11-21T00:00", ["severity"]),
+        ("shift", "2026-11-20/night", "2026-11-21/morning", ["action", "source"]),
+        ("day", "2026-11-20", "2026-11-22", ["action"]),
     ])
     def test_string_bounds_and_group_by(self, served: Served, by: str, since: str, until: str,
                                         group_by: list[str]) -> None:
@@ -244,11 +258,21 @@ class TestStatisticsService:
             assert {m.code for m in response.rows} >= {
                 "LIDAR_TIMEOUT", "HW_ARM1_EMERGENCY_STOP", "ACTION_NAV_ABORTED",
                 "MOTOR_OVERHEAT"}
-        if "source" in group_by:
+        if "source" in group_by and "action" not in group_by:
             assert {m.source for m in response.rows} >= {"/motor/left", "/motor/right",
                                                            "cli:alice"}
+        if {"source", "action"} <= set(group_by):
+            assert {m.source for m in response.rows} == {"/nav/bt", "/arm/controller"}
         if not group_by:
-            assert all((m.code, m.source, m.severity) == ("", "", -1) for m in response.rows)
+            assert all((m.code, m.source, m.severity, m.action) == ("", "", -1, "")
+                       for m in response.rows)
+        if "action" in group_by:
+            assert {m.action for m in response.rows} == {
+                "/nav/navigate_to_pose", "/arm/follow_joint_trajectory"}
+            nav = [m for m in response.rows if m.action == "/nav/navigate_to_pose"]
+            assert (sum(m.aborted_goals for m in nav), sum(m.succeeded_goals for m in nav),
+                    sum(m.canceled_goals for m in nav)) == (2, 1, 0)
+            assert all(m.failed_reports == 0 and m.code == "" for m in response.rows)
 
     def test_mixed_string_and_time_bounds(self, served: Served) -> None:
         until = utc(21, 0, 0)
@@ -266,9 +290,9 @@ class TestStatisticsService:
         response = served.call(GetStatistics.Request())
         assert (response.success, response.message) == (True, "")
         end = int(response.rows[-1].end.sec) * 1_000_000_000 + int(response.rows[-1].end.nanosec)
-        start = int(response.rows[0].start.sec) * 1_000_000_000
-        assert before - 61 * 10**9 <= end <= time.time_ns()
-        assert end % (60 * 10**9) == 0  # until defaults to now, rounded down to the minute
+        first = response.rows[0].start
+        start = int(first.sec) * 1_000_000_000 + int(first.nanosec)
+        assert before <= end <= time.time_ns() + 1_000  # until defaults to now, to the microsecond
         assert end - start == 24 * 3600 * 10**9
         assert {m.period_name for m in response.rows} <= {
             "morning", "afternoon", "night", "unscheduled"}

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
@@ -19,11 +20,21 @@ from pathlib import Path
 from typing import Annotated, Any, NoReturn, TextIO
 
 import typer
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
 from faultledger.cli import render
+from faultledger.cli.safe_text import cell, printable
+from faultledger.domain import validation
 from faultledger.domain.events import KINDS
 from faultledger.domain.integrity import GENESIS_HASH
-from faultledger.errors import FaultLedgerError
+from faultledger.errors import DamagedDatabaseError, FaultLedgerError
+from faultledger.service.anchors import (
+    AnchorCheck,
+    load_public_key,
+    newest_anchor,
+    verify_anchors,
+    with_anchors,
+)
 from faultledger.service.config import load_settings
 from faultledger.service.ledger import (
     FaultLedger,
@@ -31,6 +42,7 @@ from faultledger.service.ledger import (
     seq_recorded_by,
     seqs_recorded_between,
 )
+from faultledger.service.output_files import OutputFileError, check_target, open_text_output
 from faultledger.store.event_log import StoredRecord
 
 # The same options as cli/main.py's (kept here: main imports this module, not the reverse).
@@ -93,7 +105,10 @@ def history(
     as_json: Annotated[bool, typer.Option("--json", help="Same as --format jsonl.")] = False,
     as_csv: Annotated[bool, typer.Option("--csv", help="Same as --format csv.")] = False,
     output: Annotated[Path | None, typer.Option(
-        "--output", "-o", help="Write the export to this file (default: stdout).")] = None,
+        "--output", "-o", help="Write the export to this file (default: stdout); an existing "
+        "file is kept unless --force.")] = None,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace an existing --output file.")] = False,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
@@ -103,9 +118,14 @@ def history(
     _check_seq_range(from_seq, to_seq)
     if output is not None and chosen is Format.table:
         _fail("--output writes an export: add --format csv or --format jsonl")
+    if output is not None:
+        try:
+            check_target(output, force)  # before the query: refuse early, write nothing
+        except OutputFileError as error:
+            _fail(str(error))
     filters: dict[str, Any] = {
-        "codes": code or None, "source": source, "since": _parse_time(since, "--since"),
-        "until": _parse_time(until, "--until"), "kinds": kind or (), "limit": limit,
+        "codes": code or None, "source": source, "since": parse_time(since, "--since"),
+        "until": parse_time(until, "--until"), "kinds": kind or (), "limit": limit,
         "from_seq": from_seq, "to_seq": to_seq,
     }
     with _ledger(db, config) as ledger:
@@ -115,9 +135,9 @@ def history(
             return
         rows = export_history(ledger, **filters)
         writer = _write_csv if chosen is Format.csv else _write_jsonl
-        count = _export(rows, writer, output)
+        count = _export(rows, writer, output, force)
     if output is not None:
-        render.console(stderr=True).print(f"wrote {count} records to {output}")
+        render.console(stderr=True).print(cell(f"wrote {count} records to {output}"))
 
 
 def verify(
@@ -132,25 +152,39 @@ def verify(
     until: Annotated[str | None, typer.Option(
         "--until", help="Segment up to the last record recorded at or before this (the "
         "prefix `state-at` uses).")] = None,
+    anchor_file: Annotated[list[Path] | None, typer.Option(
+        "--anchor", help="Signed anchor file (repeatable; `faultledger anchor`): its record "
+        "must be stored with the anchored hash, the chain intact up to it. Default: the newest "
+        "in the config's anchors.directory when anchors.public_key is set too.")] = None,
+    public_key: Annotated[Path | None, typer.Option(
+        "--public-key", help="The trusted Ed25519 public key (PEM) anchors must be signed "
+        "with (default: the config's anchors.public_key).")] = None,
     as_json: JsonOption = False,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Check the hash chain (and, for the whole log, that the projections equal a full replay);
-    with a range, only that segment, from the stored hash of the record before it."""
+    """Check the hash chain (and, for the whole log, that the projections equal a full replay
+    and SQLite's integrity check passes); with a range, only that segment, from the stored
+    hash of the record before it. With anchors, also that the log still holds what they
+    signed."""
     if (since is not None or until is not None) and (from_seq is not None or to_seq is not None):
         _fail("give a seq range (--from-seq/--to-seq) or a time range (--since/--until), "
               "not both")
     _check_seq_range(from_seq, to_seq)
-    with _ledger(db, config) as ledger:
+    anchor_paths, trusted = _anchor_inputs(anchor_file, public_key, config)
+    matched: list[AnchorCheck] = []
+    with _ledger(db, config, verifying=True) as ledger:
         start, end = from_seq, to_seq
         if since is not None or until is not None:
-            start, end = seqs_recorded_between(ledger, _parse_time(since, "--since"),
-                                               _parse_time(until, "--until"))
+            start, end = seqs_recorded_between(ledger, parse_time(since, "--since"),
+                                               parse_time(until, "--until"))
         ranged = start is not None or end is not None
         report_ = ledger.verify(start, end) if ranged else ledger.verify()
         first = 1 if start is None else start
         anchor = _stored_hash(ledger, first - 1) if ranged else GENESIS_HASH
+        if trusted is not None:
+            anchored = verify_anchors(ledger, anchor_paths, trusted)
+            report_, matched = with_anchors(report_, anchored), anchored.matched
     if as_json:
         data: dict[str, Any] = {
             "ok": report_.ok, "records": report_.records, "head_seq": report_.head_seq,
@@ -159,20 +193,32 @@ def verify(
         if ranged:
             data.update({"from_seq": first, "to_seq": end, "anchor_seq": first - 1,
                          "anchor_hash": anchor})
+        if trusted is not None:
+            data["anchors"] = [{"file": str(m.path), "seq": m.anchor.seq,
+                                "hash": m.anchor.hash, "key_id": m.anchor.key_id,
+                                "anchored_at": iso_ns(m.anchor.anchored_at_ns)}
+                               for m in matched]
         typer.echo(json.dumps(data, indent=2))
     elif report_.ok and not ranged:
-        typer.echo(f"OK: {report_.records} records, chain intact, projections equal a full "
-                   f"replay; head seq {report_.head_seq} hash {report_.head_hash}")
+        typer.echo(printable(f"OK: {report_.records} records, chain intact, projections "
+                             f"equal a full replay; head seq {report_.head_seq} hash "
+                             f"{report_.head_hash}"))
     elif report_.ok:
         origin = ("the genesis hash" if first == 1
                   else f"the stored hash of record {first - 1} ({anchor})")
-        typer.echo(f"OK: records {first}..{report_.head_seq} ({report_.records} records), chain "
-                   f"intact from {origin}; seq {report_.head_seq} hash {report_.head_hash}")
+        typer.echo(printable(f"OK: records {first}..{report_.head_seq} ({report_.records} "
+                             f"records), chain intact from {origin}; seq {report_.head_seq} "
+                             f"hash {report_.head_hash}"))
     else:
         for problem in report_.problems:
             render.complain("FAILED:", problem)
         if report_.first_bad_seq is not None:
             typer.echo(f"first bad seq: {report_.first_bad_seq}")
+    if report_.ok and not as_json:
+        for m in matched:
+            typer.echo(printable(f"anchor {m.path}: seq {m.anchor.seq} hash {m.anchor.hash} "
+                                 f"(made {iso_ns(m.anchor.anchored_at_ns)}, key "
+                                 f"{m.anchor.key_id}) matches"))
     if not report_.ok:
         raise typer.Exit(1)
 
@@ -188,10 +234,10 @@ def state_at(
     """The fault table (every status) as of a seq or a time: a replay of that log prefix, with
     the hash of its last record, which anchors it."""
     moment: datetime | int
-    if when.strip().isdigit():
+    if re.fullmatch(r"[0-9]{1,19}", when.strip()):
         moment = int(when)
     else:
-        moment = _parse_time(when, "WHEN|SEQ", "a seq number or an ISO 8601 date or time") or 0
+        moment = parse_time(when, "WHEN|SEQ", "a seq number or an ISO 8601 date or time") or 0
     with _ledger(db, config) as ledger:
         seq = seq_recorded_by(ledger, moment)
         faults = ledger.state_at(seq)
@@ -204,7 +250,7 @@ def state_at(
     title = f"faults as of seq {seq}" + (f" (recorded at or before {at})" if at else "")
     out = render.console()
     out.print(render.faults_table(faults, title))
-    out.print(f"seq {seq} hash {digest}")
+    out.print(cell(f"seq {seq} hash {digest}"))
 
 
 # -- export ----------------------------------------------------------------------------------
@@ -259,8 +305,10 @@ def _write_csv(rows: Iterable[StoredRecord], out: TextIO) -> int:
     return count
 
 
-def _export(rows: Iterator[StoredRecord], write: Writer, output: Path | None) -> int:
-    """Stream rows out. A file appears only once complete (written beside it, then renamed)."""
+def _export(rows: Iterator[StoredRecord], write: Writer, output: Path | None,
+            force: bool = False) -> int:
+    """Stream rows out. A file appears only once complete (cli/output_files.py: a temporary
+    file of its own beside it, then renamed; an existing one only replaced with ``force``)."""
     if output is None:
         try:
             count = write(rows, sys.stdout)
@@ -270,17 +318,11 @@ def _export(rows: Iterator[StoredRecord], write: Writer, output: Path | None) ->
             os.dup2(devnull, sys.stdout.fileno())
             raise typer.Exit(1) from None
         return count
-    partial = output.with_name(output.name + ".partial")
     try:
-        with partial.open("w", encoding="utf-8", newline="") as out:
+        with open_text_output(output, force) as out:
             count = write(rows, out)
-        partial.replace(output)
-    except OSError as error:
-        partial.unlink(missing_ok=True)
-        _fail(f"cannot write {output}: {error.strerror or error}")
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        raise
+    except OutputFileError as error:
+        _fail(str(error))
     return count
 
 
@@ -291,13 +333,20 @@ def _fail(message: str, code: int = 2) -> NoReturn:
 
 
 @contextmanager
-def _ledger(db: str | None, config: Path | None) -> Iterator[FaultLedger]:
+def _ledger(db: str | None, config: Path | None, *, verifying: bool = False
+            ) -> Iterator[FaultLedger]:
     """A read-only ledger (nothing created, migrated or recorded); its errors become one line
-    and exit 2 also when the app runs without cli.main's wrapper (tests, embedding)."""
+    and exit 2 also when the app runs without cli.main's wrapper (tests, embedding). For
+    `verify`, a database whose content cannot be read back is a failed check (exit 1)."""
     try:
         settings = load_settings(config)
         ledger = FaultLedger.open(db or settings.database.url, create=False, upgrade=False,
                                   max_batch=settings.database.max_batch, background=False)
+    except DamagedDatabaseError as error:
+        if verifying:
+            render.complain("verify FAILED:", str(error))
+            raise typer.Exit(1) from None
+        _fail(str(error))
     except FaultLedgerError as error:
         _fail(str(error))
     try:
@@ -308,7 +357,7 @@ def _ledger(db: str | None, config: Path | None) -> Iterator[FaultLedger]:
         ledger.close()
 
 
-def _parse_time(text: str | None, name: str, expected: str = "an ISO 8601 date or time"
+def parse_time(text: str | None, name: str, expected: str = "an ISO 8601 date or time"
                 ) -> datetime | None:
     """ISO 8601 date or date-time; one without an offset is this machine's local time (as in
     the other commands)."""
@@ -318,8 +367,15 @@ def _parse_time(text: str | None, name: str, expected: str = "an ISO 8601 date o
         moment = datetime.fromisoformat(text.strip())
     except ValueError:
         _fail(f"{name} must be {expected} (e.g. 2026-11-21, 2026-11-21T22:00 or "
-              f"2026-11-21T22:00Z), got {text!r}")
-    return moment if moment.tzinfo is not None else moment.astimezone()
+              f"2026-11-21T22:00Z), got {validation.shown(text)}")
+    try:
+        moment = moment if moment.tzinfo is not None else moment.astimezone()
+    except (ValueError, OverflowError):  # year 1 or 9999 moved by the local offset
+        _fail(validation.range_message(name, validation.shown(text)))
+    problem = validation.time_error(name, moment)
+    if problem:
+        _fail(problem)
+    return moment
 
 
 def _check_seq_range(from_seq: int | None, to_seq: int | None) -> None:
@@ -333,6 +389,35 @@ def _output_format(fmt: Format | None, as_json: bool, as_csv: bool) -> Format:
     if len(set(chosen)) > 1:
         _fail("choose one output format: --format, --json or --csv")
     return chosen[0] if chosen else Format.table
+
+
+def _anchor_inputs(files: list[Path] | None, public_key: Path | None, config: Path | None
+                   ) -> tuple[list[Path], Ed25519PublicKey | None]:
+    """The anchor files `verify` checks and the trusted key; no key: no anchor check.
+
+    Without --anchor, the newest anchor in the config's anchors.directory is checked when the
+    config also names anchors.public_key (an empty directory: a note, the chain alone).
+    """
+    try:
+        settings = load_settings(config).anchors
+        key_path = public_key or settings.public_key
+        paths = list(files or [])
+        if not paths and settings.directory is not None and key_path is not None:
+            newest = newest_anchor(settings.directory)
+            if newest is None:
+                render.complain("note:", f"no anchor in {settings.directory}: only the "
+                                "chain is checked")
+                return [], None
+            paths = [newest]
+        if paths and key_path is None:
+            _fail("--anchor needs the trusted key: --public-key FILE (or anchors.public_key "
+                  "in the config)")
+        if key_path is not None and not paths:
+            _fail("--public-key needs an anchor: --anchor FILE (or anchors.directory in the "
+                  "config)")
+        return paths, None if key_path is None else load_public_key(key_path)
+    except FaultLedgerError as error:
+        _fail(str(error))
 
 
 def _stored_hash(ledger: FaultLedger, seq: int) -> str | None:

@@ -5,8 +5,10 @@ from __future__ import annotations
 from datetime import UTC, datetime, timedelta
 
 from rich.console import Console
+from rich.text import Text
 
 from faultledger.cli import render
+from faultledger.cli.safe_text import printable
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
 from faultledger.service.ledger import FaultLedger
@@ -16,7 +18,8 @@ CODE = "DEMO_MOTOR_OVERHEAT"
 
 
 def run_demo(url: str, out: Console) -> None:
-    out.print(f"[bold]faultledger demo[/] on {render.describe_url(url)}")
+    out.print(Text.assemble(("faultledger demo", "bold"), " on ",
+                            printable(render.describe_url(url))))
     out.print("policy: confirm after 3 FAILED (counter -3), heal after the counter reaches +3\n")
     with FaultLedger.open(url, policy=DEMO_POLICY, background=False) as ledger:
         start = ledger.last_seq
@@ -37,7 +40,7 @@ def run_demo(url: str, out: Console) -> None:
             _announce(out, announced)
         result = ledger.clear(CODE, actor="demo:operator", reason="motor replaced",
                               at=t0 + timedelta(seconds=len(steps)))
-        out.print(f"  clear -> {result.message}")
+        out.print(Text(printable(f"  clear -> {result.message}")))
         _announce(out, announced)
         out.print()
         out.print(render.history_table(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import getpass
 import json
 import os
+import re
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -14,8 +15,10 @@ from typing import Annotated, NoReturn
 
 import typer
 
+from faultledger.cli import anchor as anchor_commands
 from faultledger.cli import audit, render
 from faultledger.cli import stats as stats_commands
+from faultledger.cli.safe_text import printable
 from faultledger.domain.clock import from_ns
 from faultledger.domain.types import FaultStatus, Severity
 from faultledger.errors import FaultLedgerError
@@ -44,6 +47,8 @@ ConfigOption = Annotated[
                  help="YAML configuration file (see config/faultledger.yaml)."),
 ]
 JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
+SEQ_NUMBER = re.compile(r"[0-9]{1,19}")
+"""A seq number where a time or a seq may be given (ASCII digits that fit 64 bits)."""
 
 def fail(message: str, code: int = 2) -> NoReturn:
     render.complain("error:", message)
@@ -73,14 +78,8 @@ def opened(db: str | None, config: Path | None, *, writer: bool = False) -> Iter
 
 
 def parse_time(text: str | None, name: str) -> datetime | None:
-    """ISO 8601; a time without an offset is local time of this machine."""
-    if text is None:
-        return None
-    try:
-        moment = datetime.fromisoformat(text)
-    except ValueError:
-        fail(f"{name} must be an ISO 8601 date or time (e.g. 2026-11-21T22:00), got {text!r}")
-    return moment if moment.tzinfo is not None else moment.astimezone()
+    """ISO 8601; a time without an offset is local time of this machine (cli/audit.py)."""
+    return audit.parse_time(text, name)
 
 
 def parse_severity(text: str) -> int:
@@ -113,7 +112,7 @@ def report(
             fail(f"report rejected: {result.message}", 1)
         fault = ledger.get_fault(fault_code)
     status = fault.status.value if fault else "(no fault)"
-    typer.echo(f"accepted: {result.message}; {fault_code} is {status}")
+    typer.echo(printable(f"accepted: {result.message}; {fault_code} is {status}"))
 
 
 @app.command("list")
@@ -131,7 +130,8 @@ def list_faults(
     """List faults (CONFIRMED by default, like the ROS list_faults service)."""
     with opened(db, config) as ledger:
         if at is not None:
-            faults = ledger.state_at(int(at) if at.isdigit() else parse_time(at, "--at") or 0)
+            faults = ledger.state_at(int(at) if SEQ_NUMBER.fullmatch(at)
+                                     else parse_time(at, "--at") or 0)
             title = f"faults at {at}"
         else:
             statuses = [s.value for s in FaultStatus] if all_statuses else status or []
@@ -186,13 +186,15 @@ def clear(
         result = ledger.clear(fault_code, actor=who, reason=reason)
     if not result.success:
         fail(result.message, 1)
-    typer.echo(result.message)
+    typer.echo(printable(result.message))
 
 
 # history, verify and state-at: the audit commands, in cli/audit.py.
 audit.register(app)
 # stats and report-shift, in cli/stats.py.
 stats_commands.register(app)
+# anchor (export, keygen): signed anchors of the log head, in cli/anchor.py.
+anchor_commands.register(app)
 
 
 @app.command()
@@ -213,7 +215,7 @@ def db_upgrade(db: DbOption = None, config: ConfigOption = None) -> None:
         head = migrate.ensure_current(database, upgrade=True)
     finally:
         database.dispose()
-    typer.echo(f"{describe(database.url)}: {before or '(empty)'} -> {head}")
+    typer.echo(printable(f"{describe(database.url)}: {before or '(empty)'} -> {head}"))
 
 
 @db_app.command("current")
@@ -226,7 +228,8 @@ def db_current(db: DbOption = None, config: ConfigOption = None) -> None:
         database.dispose()
     head = migrate.head_revision()
     state = "up to date" if current == head else "needs `faultledger db upgrade`"
-    typer.echo(f"{describe(database.url)}: {current or '(empty)'} (head {head}, {state})")
+    typer.echo(printable(
+        f"{describe(database.url)}: {current or '(empty)'} (head {head}, {state})"))
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})

@@ -7,9 +7,10 @@ from datetime import UTC, datetime
 from typing import Any
 
 from rich.console import Console
-from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
+from faultledger.cli.safe_text import cell, printable
 from faultledger.domain.clock import from_ns
 from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
@@ -60,15 +61,17 @@ def fault_dict(fault: Fault) -> dict[str, Any]:
 
 
 def faults_table(faults: Iterable[Fault], title: str) -> Table:
-    table = Table(title=title, title_justify="left")
+    """Every value from outside (code, sources, description, title) is shown literally:
+    ``safe_text.cell``, never markup, never a control character."""
+    table = Table(title=cell(title), title_justify="left")
     for column in ("code", "status", "severity", "count", "counter", "last occurred (UTC)",
                    "sources", "description"):
         table.add_column(column, overflow="fold")
     for f in faults:
         table.add_row(
-            f.fault_code, f"[{_STATUS_STYLE[f.status]}]{f.status.value}[/]",
+            cell(f.fault_code), cell(f.status.value, _STATUS_STYLE[f.status]),
             severity_name(f.severity), str(f.occurrence_count), str(f.debounce_counter),
-            short(f.last_occurred), ", ".join(f.reporting_sources), f.description,
+            short(f.last_occurred), cell(", ".join(f.reporting_sources)), cell(f.description),
         )
     return table
 
@@ -86,6 +89,8 @@ def summary(record: LogRecord) -> str:
         return canonical_json(p["policy"])
     if record.kind == "fault_confirmed_by_timer":
         return f"PREFAILED for {p['after_sec']} s"
+    if record.kind == "goal_outcome":
+        return f"goal {p['goal_id']} of {p['action']}: {p['status']}"
     return str(p.get("reason", ""))
 
 
@@ -94,8 +99,8 @@ def history_table(records: Iterable[LogRecord]) -> Table:
     for column in ("seq", "occurred (UTC)", "kind", "code", "source", "details"):
         table.add_column(column, overflow="fold")
     for r in records:
-        table.add_row(str(r.seq), short(r.occurred_at), r.kind, r.fault_code or "",
-                      r.source_id or "", summary(r))
+        table.add_row(str(r.seq), short(r.occurred_at), cell(r.kind), cell(r.fault_code or ""),
+                      cell(r.source_id or ""), cell(summary(r)))
     return table
 
 
@@ -106,7 +111,7 @@ def transitions_table(items: Iterable[Transition]) -> Table:
     for t in items:
         table.add_row(str(t.seq), short(from_ns(t.at_ns)),
                       t.from_status.value if t.from_status else "(new)", t.to_status.value,
-                      t.cause, t.source_id)
+                      cell(t.cause), cell(t.source_id))
     return table
 
 
@@ -120,9 +125,10 @@ def describe_url(url: str) -> str:
 
 def complain(label: str, message: str) -> None:
     """One line on stderr: the label in red, the operator's text verbatim (never as markup,
-    never wrapped, so brackets survive and the line stays greppable)."""
+    never wrapped, so brackets survive and the line stays greppable; control characters it
+    quotes are shown escaped, see ``safe_text.printable``)."""
     Console(stderr=True, highlight=False, soft_wrap=True).print(
-        f"[bold red]{label}[/] {escape(message)}")
+        Text.assemble((printable(label), "bold red"), " ", printable(message)))
 
 
 def console(stderr: bool = False) -> Console:

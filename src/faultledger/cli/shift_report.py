@@ -12,11 +12,11 @@ from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 
 from rich.console import Group, RenderableType
-from rich.markup import escape
 from rich.table import Table
 from rich.text import Text
 
 from faultledger.cli.render import severity_name
+from faultledger.cli.safe_text import cell, printable
 from faultledger.domain.shifts import Period, ShiftCalendar, ShiftInstance
 from faultledger.domain.stat_rows import StatsRow
 from faultledger.errors import InvalidInputError
@@ -31,10 +31,11 @@ SEARCH_BACK = timedelta(days=14)
 KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("failed_reports", "failed reports", "count"),
     ("activations", "activations", "count"),
+    ("aborted_goals", "aborted goals", "count"),
     ("confirmations", "confirmations", "count"),
     ("heals", "heals", "count"),
     ("clears", "clears", "count"),
-    ("active_seconds", "active time", "duration"),
+    ("active_seconds", "fault time CONFIRMED (sum)", "duration"),
     ("mttr_seconds", "MTTR", "duration"),
     ("mtbf_seconds", "MTBF", "duration"),
     ("flood_percent", "time in flood", "percent"),
@@ -77,6 +78,7 @@ class HourBar:
     start: datetime
     activations: int
     confirmations: int
+    aborted_goals: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,6 +109,19 @@ class ShiftReport:
         """``Sat 2026-11-21 22:00 – Sun 2026-11-22 06:00 Europe/Berlin``."""
         start, end = self.local(self.shift.start), self.local(self.shift.end)
         return f"{start:%a %Y-%m-%d %H:%M} – {end:%a %Y-%m-%d %H:%M} {self.timezone}"
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """Why a figure may look impossible: sums of durations over faults can exceed the
+        shift, and a shift still running is counted only up to ``as_of``."""
+        found: list[str] = []
+        active = next((f.value for f in self.figures if f.key == "active_seconds"), None)
+        elapsed = (min(self.as_of, self.shift.end) - self.shift.start).total_seconds()
+        if active is not None and active > elapsed > 0:
+            found.append(f"fault time CONFIRMED ({duration(active)}) is summed over faults: "
+                         f"several were CONFIRMED at the same time, so it exceeds the "
+                         f"{duration(elapsed)} of the shift; see the downtimes below")
+        return tuple(found)
 
     @property
     def length_text(self) -> str:
@@ -143,7 +158,11 @@ def nominal_seconds(calendar: ShiftCalendar, shift: ShiftInstance) -> float:
 
 def build_report(ledger: FaultLedger, calendar: ShiftCalendar, shift_id: str | None,
                  as_of: datetime | None = None) -> ShiftReport:
-    """The report of shift ``shift_id`` (default: the last completed one) as of ``as_of``."""
+    """The report of shift ``shift_id`` (default: the last completed one) as of ``as_of``.
+
+    A shift still running at ``as_of`` (default now) is counted up to ``as_of`` itself (a
+    range with no end: what happened a second ago is in), not up to its planned end.
+    """
     now = as_of or datetime.now(UTC)
     if shift_id is None:
         shift = last_completed(calendar, now)
@@ -156,18 +175,20 @@ def build_report(ledger: FaultLedger, calendar: ShiftCalendar, shift_id: str | N
             raise InvalidInputError(f"shift {shift.id} has not started yet (it starts "
                                     f"{shift.start.astimezone(calendar.zone):%Y-%m-%d %H:%M})")
     previous = calendar.previous(shift)
-    row = _shift_row(ledger, calendar, shift, now)
-    previous_row = None if previous is None else _shift_row(ledger, calendar, previous, now)
+    until = shift.end if shift.end <= now else None
+    row = _shift_row(ledger, calendar, shift, now, until)
+    previous_row = (None if previous is None
+                    else _shift_row(ledger, calendar, previous, now, previous.end))
     figures = tuple(
         Comparison(key, label, kind, getattr(row, key),
                    None if previous_row is None else getattr(previous_row, key))
         for key, label, kind in KEY_FIGURES)
-    by_code = [r for r in ledger.stats("shift", shift.start, shift.end, group_by=["code"],
+    by_code = [r for r in ledger.stats("shift", shift.start, until, group_by=["code"],
                                        calendar=calendar, as_of=now)
                if r.period.id == shift.id
                and (r.activations or r.confirmations or r.failed_reports)]
     by_code.sort(key=lambda r: (-r.activations, -r.confirmations, str(r.group["code"])))
-    hours = ledger.stats("hour", shift.start, shift.end, calendar=calendar, as_of=now)
+    hours = ledger.stats("hour", shift.start, until, calendar=calendar, as_of=now)
     return ShiftReport(
         shift=shift, timezone=calendar.timezone,
         nominal_seconds=nominal_seconds(calendar, shift), as_of=now, row=row,
@@ -178,8 +199,8 @@ def build_report(ledger: FaultLedger, calendar: ShiftCalendar, shift_id: str | N
 
 
 def _shift_row(ledger: FaultLedger, calendar: ShiftCalendar, shift: ShiftInstance,
-               as_of: datetime) -> StatsRow:
-    rows = ledger.stats("shift", shift.start, shift.end, calendar=calendar, as_of=as_of)
+               as_of: datetime, until: datetime | None) -> StatsRow:
+    rows = ledger.stats("shift", shift.start, until, calendar=calendar, as_of=as_of)
     for row in rows:
         if row.period.id == shift.id:
             return row
@@ -194,7 +215,7 @@ def _hour_bars(rows: list[StatsRow], calendar: ShiftCalendar) -> tuple[HourBar, 
     return tuple(
         HourBar(label if repeated[label] == 1
                 else f"{label} {r.period.start.astimezone(zone):%Z}",
-                r.period.start, r.activations, r.confirmations)
+                r.period.start, r.activations, r.confirmations, r.aborted_goals)
         for label, r in zip(labels, rows, strict=True))
 
 
@@ -262,15 +283,17 @@ def group_text(row: StatsRow, key: str) -> str:
 def terminal(report: ShiftReport) -> RenderableType:
     """The report as rich renderables, for ``faultledger report-shift``."""
     shift = report.shift
-    head = Text.assemble(("Shift report ", "bold"), (shift.id, "bold cyan"))
-    lines = [head, Text(f"{report.span_text}, {report.length_text}")]
+    head = Text.assemble(("Shift report ", "bold"), (printable(shift.id), "bold cyan"))
+    lines = [head, cell(f"{report.span_text}, {report.length_text}")]
     if report.in_progress:
-        lines.append(Text(f"in progress: figures up to {local_time(report, report.as_of)}",
-                          style="yellow"))
+        lines.append(cell(f"in progress: figures up to {local_time(report, report.as_of)}",
+                          "yellow"))
     compared = report.previous.id if report.previous else "no previous instance"
-    lines.append(Text(f"compared with {compared}", style="dim"))
-    parts: list[RenderableType] = [*lines, _figures_table(report), _offenders_table(report),
-                                   _downtimes_table(report), _hours_table(report)]
+    lines.append(cell(f"compared with {compared}", "dim"))
+    notes = [cell(f"note: {note}", "yellow") for note in report.notes]
+    parts: list[RenderableType] = [*lines, _figures_table(report), *notes,
+                                   _offenders_table(report), _downtimes_table(report),
+                                   _hours_table(report)]
     return Group(*parts)
 
 
@@ -278,8 +301,8 @@ def _figures_table(report: ShiftReport) -> Table:
     previous = report.previous.id if report.previous else "previous"
     table = Table(title="key figures", title_justify="left")
     table.add_column("figure")
-    table.add_column(report.shift.id, justify="right")
-    table.add_column(previous, justify="right")
+    table.add_column(cell(report.shift.id), justify="right")
+    table.add_column(cell(previous), justify="right")
     table.add_column("change", justify="right")
     table.add_column("change %", justify="right")
     for item in report.figures:
@@ -296,7 +319,7 @@ def _offenders_table(report: ShiftReport) -> Table:
                    "active time", "MTTR"):
         table.add_column(column, justify="left" if column == "code" else "right")
     for rank, row in enumerate(report.offenders, 1):
-        table.add_row(str(rank), escape(group_text(row, "code")), str(row.activations),
+        table.add_row(str(rank), cell(group_text(row, "code")), str(row.activations),
                       str(row.confirmations), str(row.failed_reports),
                       duration(row.active_seconds), duration(row.mttr_seconds))
     if not report.offenders:
@@ -305,14 +328,14 @@ def _offenders_table(report: ShiftReport) -> Table:
 
 
 def _downtimes_table(report: ShiftReport) -> Table:
-    table = Table(title=f"longest downtimes (CONFIRMED episodes, {report.timezone})",
+    table = Table(title=cell(f"longest downtimes (CONFIRMED episodes, {report.timezone})"),
                   title_justify="left")
     for column in ("code", "source", "severity", "confirmed at", "ended", "in shift",
                    "episode"):
         table.add_column(column, justify="right" if column in ("in shift", "episode")
                          else "left")
     for d in report.downtimes:
-        table.add_row(escape(d.fault_code), escape(d.source_id), severity_name(d.severity),
+        table.add_row(cell(d.fault_code), cell(d.source_id), severity_name(d.severity),
                       local_time(report, d.start), local_time(report, d.end),
                       duration(d.seconds_in_range), duration(d.seconds))
     if not report.downtimes:
@@ -321,16 +344,20 @@ def _downtimes_table(report: ShiftReport) -> Table:
 
 
 def _hours_table(report: ShiftReport) -> Table:
-    table = Table(title=f"per hour ({report.timezone})", title_justify="left")
+    table = Table(title=cell(f"per hour ({report.timezone})"), title_justify="left")
     table.add_column("hour")
     table.add_column("activations", justify="right")
     table.add_column("")
     table.add_column("confirmations", justify="right")
     table.add_column("")
-    peak = max([1, *(max(h.activations, h.confirmations) for h in report.hours)])
+    table.add_column("aborted goals", justify="right")
+    table.add_column("")
+    peak = max([1, *(max(h.activations, h.confirmations, h.aborted_goals)
+                     for h in report.hours)])
     for hour in report.hours:
-        table.add_row(hour.label, str(hour.activations), _bar(hour.activations, peak, "red"),
-                      str(hour.confirmations), _bar(hour.confirmations, peak, "yellow"))
+        table.add_row(cell(hour.label), str(hour.activations), _bar(hour.activations, peak, "red"),
+                      str(hour.confirmations), _bar(hour.confirmations, peak, "yellow"),
+                      str(hour.aborted_goals), _bar(hour.aborted_goals, peak, "blue"))
     return table
 
 

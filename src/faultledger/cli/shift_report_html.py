@@ -1,21 +1,26 @@
 """The end-of-shift report as one self-contained HTML file and as PNG charts (matplotlib, Agg).
 
-The HTML has its CSS inline and its charts as base64 PNG ``data:`` images, so it can be
-mailed or archived as one file and opened without a network.
+The HTML (templates/shift_report.html, Jinja2 with autoescape) has its CSS inline and its
+charts as base64 PNG ``data:`` images, so it can be mailed or archived as one file and opened
+without a network.
 """
 
 from __future__ import annotations
 
 import base64
 import io
-from html import escape
+from functools import lru_cache
+from typing import Any
 
+from jinja2 import Environment, PackageLoader, StrictUndefined
+from markupsafe import Markup
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from faultledger.cli.render import severity_name
+from faultledger.cli.safe_text import printable
 from faultledger.cli.shift_report import (
     TOP,
     ShiftReport,
@@ -29,38 +34,25 @@ from faultledger.cli.shift_report import (
 
 ACTIVATIONS_COLOR = "#c0392b"
 CONFIRMATIONS_COLOR = "#e69f00"
+ABORTED_GOALS_COLOR = "#0072b2"
 DPI = 100
-
-_CSS = """
-body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 2em;
-       color: #1d2733; max-width: 70em; }
-h1 { font-size: 1.5em; margin-bottom: 0.2em; }
-h2 { font-size: 1.15em; margin-top: 1.6em; border-bottom: 1px solid #d0d7de; }
-p.meta { margin: 0.2em 0; color: #4b5866; }
-p.warn { color: #9a6700; font-weight: 600; }
-table { border-collapse: collapse; margin: 0.5em 0; }
-th, td { padding: 0.3em 0.8em; border-bottom: 1px solid #e5e9ee; text-align: right; }
-th { background: #f3f5f7; }
-td.text, th.text { text-align: left; }
-td.worse { color: #b42318; } td.better { color: #1a7f37; }
-img { max-width: 100%; height: auto; border: 1px solid #e5e9ee; }
-footer { margin-top: 2em; color: #6b7785; font-size: 0.85em; }
-"""
 
 
 # -- charts --------------------------------------------------------------------------------------
 def _draw_hours(ax: Axes, report: ShiftReport) -> None:
     hours = report.hours
     xs = list(range(len(hours)))
-    width = 0.4
-    ax.bar([x - width / 2 for x in xs], [h.activations for h in hours], width,
+    width = 0.27
+    ax.bar([x - width for x in xs], [h.activations for h in hours], width,
            label="activations", color=ACTIVATIONS_COLOR)
-    ax.bar([x + width / 2 for x in xs], [h.confirmations for h in hours], width,
+    ax.bar(xs, [h.confirmations for h in hours], width,
            label="confirmations", color=CONFIRMATIONS_COLOR)
+    ax.bar([x + width for x in xs], [h.aborted_goals for h in hours], width,
+           label="aborted goals", color=ABORTED_GOALS_COLOR)
     ax.set_xticks(xs, [h.label for h in hours], rotation=45 if len(hours) > 12 else 0,
                   ha="right" if len(hours) > 12 else "center")
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_title(f"{report.shift.id}: activations and confirmations per hour "
+    ax.set_title(f"{report.shift.id}: activations, confirmations and aborted goals per hour "
                  f"({report.timezone})")
     ax.set_xlabel("local hour")
     ax.legend(loc="best")
@@ -119,25 +111,42 @@ def charts_png(report: ShiftReport) -> bytes:
 
 
 # -- HTML ----------------------------------------------------------------------------------------
-def _img(png: bytes, alt: str) -> str:
-    data = base64.b64encode(png).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="{escape(alt)}">'
+TEMPLATE = "shift_report.html"
+"""In src/faultledger/templates/ (package data)."""
+
+Cell = dict[str, str]
+"""One table cell for the template: ``text`` and CSS ``cls`` (empty for none)."""
+
+
+def _finalize(value: object) -> object:
+    """Every ``{{ value }}`` of the template: text shown literally (control, format and bidi
+    characters escaped visibly) before autoescape makes it HTML-safe. Markup (a macro's own
+    output) is already safe and passes unchanged."""
+    if isinstance(value, str) and not isinstance(value, Markup):
+        return printable(value)
+    return value
+
+
+@lru_cache(maxsize=1)
+def _environment() -> Environment:
+    return Environment(loader=PackageLoader("faultledger", "templates"), autoescape=True,
+                       undefined=StrictUndefined, finalize=_finalize,
+                       keep_trailing_newline=True)
+
+
+def _cells(values: list[str], text_columns: set[int], classes: list[str] | None = None
+           ) -> list[Cell]:
+    return [{"text": value,
+             "cls": " ".join(n for n in ("text" if i in text_columns else "",
+                                         classes[i] if classes else "") if n)}
+            for i, value in enumerate(values)]
 
 
 def _table(headers: list[str], rows: list[list[str]], text_columns: set[int],
-           classes: list[list[str]] | None = None) -> str:
-    def cell(tag: str, i: int, value: str, extra: str = "") -> str:
-        names = " ".join(n for n in ("text" if i in text_columns else "", extra) if n)
-        attr = f' class="{names}"' if names else ""
-        return f"<{tag}{attr}>{escape(value)}</{tag}>"
-
-    head = "".join(cell("th", i, h) for i, h in enumerate(headers))
-    body = []
-    for r, row in enumerate(rows):
-        extras = classes[r] if classes else [""] * len(row)
-        body.append("<tr>" + "".join(cell("td", i, v, extras[i]) for i, v in enumerate(row))
-                    + "</tr>")
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+           classes: list[list[str]] | None = None) -> dict[str, Any]:
+    return {"headers": _cells(headers, text_columns),
+            "rows": [_cells(row, text_columns, classes[r] if classes else None)
+                     for r, row in enumerate(rows)]}
 
 
 _BETTER_WHEN_UP = {"mtbf_seconds"}
@@ -154,7 +163,8 @@ def _trend(key: str, change: float | None) -> str:
 
 
 def html(report: ShiftReport) -> str:
-    """The whole report as one HTML document."""
+    """The whole report as one HTML document (templates/shift_report.html; every value from
+    the ledger is escaped there, never pasted into HTML here)."""
     shift = report.shift
     previous = report.previous.id if report.previous else "previous"
     figure_rows, figure_classes = [], []
@@ -172,43 +182,29 @@ def html(report: ShiftReport) -> str:
                       local_time(report, d.start), local_time(report, d.end),
                       duration(d.seconds_in_range), duration(d.seconds)]
                      for d in report.downtimes]
-    hour_rows = [[h.label, str(h.activations), str(h.confirmations)] for h in report.hours]
-    notes = []
-    if report.in_progress:
-        notes.append(f'<p class="warn">In progress: figures up to '
-                     f"{escape(local_time(report, report.as_of))}.</p>")
-    if shift.seconds != report.nominal_seconds:
-        notes.append('<p class="warn">This shift\'s length differs from its nominal length '
-                     "because of a daylight saving time change.</p>")
-    compared = (f"Compared with {escape(previous)}." if report.previous
-                else "No previous instance of this shift to compare with.")
-    sections = [
-        f"<h1>Shift report {escape(shift.id)}</h1>",
-        f'<p class="meta">{escape(report.span_text)} — {escape(report.length_text)}</p>',
-        f'<p class="meta">{compared}</p>',
-        *notes,
-        "<h2>Key figures</h2>",
-        _table(["figure", shift.id, previous, "change", "change %"], figure_rows, {0},
-               figure_classes),
-        f"<h2>Top {TOP} offenders</h2>",
-        "<p class=\"meta\">By activations, then confirmations.</p>",
-        _table(["#", "code", "activations", "confirmations", "failed reports", "active time",
-                "MTTR"], offender_rows, {1}) if offender_rows
-        else "<p>No failed reports in this shift.</p>",
-        _img(offenders_png(report), f"top offenders of {shift.id}"),
-        "<h2>Longest downtimes</h2>",
-        f'<p class="meta">CONFIRMED episodes overlapping the shift, most time inside it '
-        f"first; times in {escape(report.timezone)}.</p>",
-        _table(["code", "source", "severity", "confirmed at", "ended", "in shift", "episode"],
-               downtime_rows, {0, 1, 2, 3, 4}) if downtime_rows
-        else "<p>No fault was CONFIRMED during this shift.</p>",
-        "<h2>Per hour</h2>",
-        _img(hours_png(report), f"activations and confirmations per hour of {shift.id}"),
-        _table(["hour", "activations", "confirmations"], hour_rows, {0}),
-        f"<footer>faultledger report-shift, as of {escape(local_time(report, report.as_of))} "
-        f"{escape(report.timezone)}. Definitions: docs/statistics.md.</footer>",
-    ]
-    body = "\n".join(sections)
-    return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-            f"<title>Shift report {escape(shift.id)}</title>\n<style>{_CSS}</style>\n"
-            f"</head>\n<body>\n{body}\n</body>\n</html>\n")
+    hour_rows = [[h.label, str(h.activations), str(h.confirmations), str(h.aborted_goals)]
+                 for h in report.hours]
+    context: dict[str, Any] = {
+        "shift_id": shift.id,
+        "span_text": report.span_text,
+        "length_text": report.length_text,
+        "previous_id": report.previous.id if report.previous else None,
+        "notes": report.notes,
+        "in_progress_until": (local_time(report, report.as_of) if report.in_progress
+                              else None),
+        "dst_change": shift.seconds != report.nominal_seconds,
+        "top": TOP,
+        "timezone": report.timezone,
+        "as_of": local_time(report, report.as_of),
+        "figures": _table(["figure", shift.id, previous, "change", "change %"], figure_rows,
+                          {0}, figure_classes),
+        "offenders": _table(["#", "code", "activations", "confirmations", "failed reports",
+                             "active time", "MTTR"], offender_rows, {1}),
+        "downtimes": _table(["code", "source", "severity", "confirmed at", "ended",
+                             "in shift", "episode"], downtime_rows, {0, 1, 2, 3, 4}),
+        "hours": _table(["hour", "activations", "confirmations", "aborted goals"], hour_rows,
+                        {0}),
+        "offenders_png": base64.b64encode(offenders_png(report)).decode("ascii"),
+        "hours_png": base64.b64encode(hours_png(report)).decode("ascii"),
+    }
+    return _environment().get_template(TEMPLATE).render(context)

@@ -18,10 +18,10 @@ from pathlib import Path
 from typing import Annotated, NoReturn
 
 import typer
-from rich.markup import escape
 from rich.table import Table
 
 from faultledger.cli import render
+from faultledger.cli.safe_text import cell, printable
 from faultledger.cli.shift_report import build_report, duration, group_text, terminal
 from faultledger.domain.periods import PERIOD_KINDS, default_calendar, parse_bound
 from faultledger.domain.shifts import ShiftCalendar
@@ -29,6 +29,7 @@ from faultledger.domain.stat_rows import GROUP_KEYS, StatsRow
 from faultledger.errors import FaultLedgerError
 from faultledger.service.config import load_settings, load_shift_calendar
 from faultledger.service.ledger import FaultLedger
+from faultledger.service.output_files import OutputFileError, check_target, write_output
 
 # The same options as cli/main.py's (kept here: main imports this module, not the reverse).
 DbOption = Annotated[
@@ -106,13 +107,14 @@ def stats(
     code: Annotated[list[str] | None, typer.Option(
         "--code", help="Fault code glob, e.g. 'HW_*_EMERGENCY_STOP' (repeatable).")] = None,
     group_by: Annotated[list[str] | None, typer.Option(
-        "--group-by", help=f"Group rows by {', '.join(GROUP_KEYS)} (repeatable).")] = None,
+        "--group-by", help=f"Group rows by {', '.join(GROUP_KEYS)} (repeatable; action: "
+        "goal outcomes per action, with source only).")] = None,
     since: Annotated[str | None, typer.Option(
         "--since", help="Start (inclusive): 2026-11-21, 2026-11-21T06:00 (calendar-local "
         "unless it has an offset) or a shift id (its start). Default: until - 24 h.")] = None,
     until: Annotated[str | None, typer.Option(
         "--until", help="End (exclusive): like --since; a shift id means its end. "
-        "Default: now.")] = None,
+        "Default: --as-of, else now (what happened a second ago is counted).")] = None,
     as_of: AsOfOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="JSON array of every figure.")
                        ] = False,
@@ -150,7 +152,8 @@ def stats_csv(rows: Sequence[StatsRow], group_by: Sequence[str]) -> str:
 
 def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
                 calendar: ShiftCalendar, codes: Sequence[str] | None) -> Table:
-    """The figures people read first; --json/--csv have all of them."""
+    """The figures people read first; --json/--csv have all of them. Rows grouped by action
+    hold goal figures only (docs/statistics.md): they show the three goal counts."""
     zone = calendar.zone
     title = f"statistics by {by}"
     if rows:
@@ -159,26 +162,32 @@ def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
                   f"{last.astimezone(zone):%Y-%m-%d %H:%M} {calendar.timezone}")
     if codes:
         title += f", codes {' '.join(codes)}"
-    table = Table(title=title, title_justify="left")
+    table = Table(title=cell(title), title_justify="left")
     table.add_column("period", overflow="fold")
     table.add_column("local time", overflow="fold")
     for key in group_by:
-        table.add_column(key, overflow="fold")
-    for column in ("failed", "activations", "confirmations", "heals", "clears", "active",
-                   "MTTR", "flood %", "chattering", "stale"):
+        table.add_column(cell(key), overflow="fold")
+    goals_only = "action" in group_by
+    columns = (("aborted goals", "canceled goals", "succeeded goals") if goals_only else
+               ("failed", "activations", "aborted goals", "confirmations", "heals", "clears",
+                "active", "MTTR", "flood %", "chattering", "stale"))
+    for column in columns:
         table.add_column(column, justify="right")
     for row in rows:
         start, end = row.period.start.astimezone(zone), row.period.end.astimezone(zone)
         span = (f"{start:%Y-%m-%d %H:%M}–{end:%H:%M}" if end.date() == start.date()
                 else f"{start:%Y-%m-%d %H:%M}–{end:%Y-%m-%d %H:%M}")
-        table.add_row(
-            row.period.id, span, *(escape(group_text(row, key)) for key in group_by),
-            str(row.failed_reports), str(row.activations), str(row.confirmations),
-            str(row.heals), str(row.clears), duration(row.active_seconds),
-            duration(row.mttr_seconds), f"{row.flood_percent:.1f}",
-            str(row.chattering_codes), str(row.stale_codes))
+        figures = ([str(row.aborted_goals), str(row.canceled_goals), str(row.succeeded_goals)]
+                   if goals_only else
+                   [str(row.failed_reports), str(row.activations), str(row.aborted_goals),
+                    str(row.confirmations), str(row.heals), str(row.clears),
+                    duration(row.active_seconds), duration(row.mttr_seconds),
+                    f"{row.flood_percent:.1f}", str(row.chattering_codes),
+                    str(row.stale_codes)])
+        table.add_row(cell(row.period.id), span,
+                      *(cell(group_text(row, key)) for key in group_by), *figures)
     if not rows:
-        table.add_row("(no rows)", *[""] * (len(group_by) + 11))
+        table.add_row("(no rows)", *[""] * (len(group_by) + len(columns) + 1))
     return table
 
 
@@ -191,6 +200,8 @@ def report_shift(
         "--html", help="Also write the report as one self-contained HTML file.")] = None,
     png_file: Annotated[Path | None, typer.Option(
         "--png", help="Also write the charts (per hour, top offenders) as a PNG.")] = None,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace existing --html/--png files (default: refuse).")] = False,
     as_of: AsOfOption = None,
     shifts: ShiftsOption = None,
     db: DbOption = None,
@@ -198,6 +209,12 @@ def report_shift(
 ) -> None:
     """End-of-shift summary: key figures against the previous instance of the same shift,
     top offenders, longest downtimes and activity per hour."""
+    for target in (html_file, png_file):
+        if target is not None:
+            try:
+                check_target(target, force)  # refuse before any work, write nothing
+            except OutputFileError as error:
+                fail(str(error))
     with reading(db, config, shifts) as (ledger, calendar):
         report = build_report(ledger, calendar, shift_id, _as_of(as_of, calendar))
     render.console().print(terminal(report))
@@ -212,7 +229,7 @@ def report_shift(
         outputs.append((png_file, shift_report_html.charts_png(report)))
     for path, data in outputs:
         try:
-            path.write_bytes(data)
-        except OSError as error:
-            fail(f"cannot write {path}: {error.strerror or error}")
-        typer.echo(f"wrote {path}")
+            write_output(path, data, force)
+        except OutputFileError as error:
+            fail(str(error))
+        typer.echo(printable(f"wrote {path}"))

@@ -120,7 +120,8 @@ def is_overdue(fault: Fault, after_sec: float, now_ns: int) -> bool:
 
 def heals_under(fault: Fault, policy: Policy) -> bool:
     """Whether healing is enabled for any source that reported this fault."""
-    return any(policy.resolve(source).healing_enabled for source in fault.reporting_sources)
+    return any(policy.resolve(source, fault.fault_code).healing_enabled
+               for source in fault.reporting_sources)
 
 
 def reclassify_on_startup(fault: Fault, policy: Policy) -> bool:
@@ -129,7 +130,7 @@ def reclassify_on_startup(fault: Fault, policy: Policy) -> bool:
 
 
 def is_ignored(fault: Fault | None, report: FaultReported) -> bool:
-    """PASSED for no fault, or for a CLEARED one: accepted, but nothing is stored (SPEC §4.2)."""
+    """PASSED for no fault, or for a CLEARED one: logged, but it changes no fault (SPEC §4.2)."""
     return report.event_type is EventType.PASSED and (
         fault is None or fault.status is FaultStatus.CLEARED
     )

@@ -5,6 +5,7 @@ NamedTuples rather than frozen dataclasses: a replay creates millions of them.
 
 from __future__ import annotations
 
+import uuid
 from collections.abc import Callable, Mapping
 from datetime import datetime
 from typing import Any, NamedTuple
@@ -21,6 +22,19 @@ FAULT_CLEARED = "fault_cleared"
 FAULT_CONFIRMED_BY_TIMER = "fault_confirmed_by_timer"
 POLICY_CHANGED = "policy_changed"
 RECLASSIFIED_ON_STARTUP = "reclassified_on_startup"
+GOAL_OUTCOME = "goal_outcome"
+
+GOAL_STATUSES = ("SUCCEEDED", "ABORTED", "CANCELED")
+"""Terminal statuses of an action goal a goal outcome record can carry."""
+GOAL_OUTCOME_NAMESPACE = uuid.UUID("d5f7db67-c1f8-484a-b325-b59fb4c061e4")
+"""Fixed namespace of goal outcome event ids (never change it: ids already logged use it)."""
+
+
+def goal_event_id(action: str, goal_id: str) -> str:
+    """The event_id of a goal's outcome: uuid5 over ``action`` and ``goal_id``, so the outcome
+    of one goal is recorded once however often it is sent (a republished status array, a
+    restarted bridge)."""
+    return str(uuid.uuid5(GOAL_OUTCOME_NAMESPACE, f"{action}\n{goal_id}"))
 
 
 class FaultReported(NamedTuple):
@@ -96,8 +110,32 @@ class ReclassifiedOnStartup(NamedTuple):
         return {"fault_code": self.fault_code, "reason": self.reason}
 
 
+class GoalOutcome(NamedTuple):
+    """The terminal status of one action goal (SPEC §3, §8): counted per goal, so aborts are
+    exact even while the action's fault stays latched. Changes no fault."""
+
+    action: str
+    goal_id: str
+    status: str
+    """One of GOAL_STATUSES."""
+    server_node: str
+
+    @property
+    def source_id(self) -> str:
+        return self.server_node
+
+    @property
+    def kind(self) -> str:
+        return GOAL_OUTCOME
+
+    def payload(self) -> dict[str, Any]:
+        return {"action": self.action, "goal_id": self.goal_id, "status": self.status,
+                "server_node": self.server_node}
+
+
 DomainEvent = (
     FaultReported | FaultCleared | FaultConfirmedByTimer | PolicyChanged | ReclassifiedOnStartup
+    | GoalOutcome
 )
 KINDS = (
     FAULT_REPORTED,
@@ -105,15 +143,18 @@ KINDS = (
     FAULT_CONFIRMED_BY_TIMER,
     POLICY_CHANGED,
     RECLASSIFIED_ON_STARTUP,
+    GOAL_OUTCOME,
 )
 
 
 def fault_code_of(event: DomainEvent) -> str | None:
-    return None if isinstance(event, PolicyChanged) else event.fault_code
+    """The fault a record concerns; None for a policy change and a goal outcome (stored as
+    NULL, so no code filter ever matches them)."""
+    return None if isinstance(event, PolicyChanged | GoalOutcome) else event.fault_code
 
 
 def source_of(event: DomainEvent) -> str | None:
-    if isinstance(event, FaultReported | FaultCleared):
+    if isinstance(event, FaultReported | FaultCleared | GoalOutcome):
         return event.source_id
     return None
 
@@ -138,6 +179,8 @@ _DECODERS: dict[str, Callable[[Mapping[str, Any]], DomainEvent]] = {
     FAULT_CONFIRMED_BY_TIMER: lambda p: FaultConfirmedByTimer(p["fault_code"], p["after_sec"]),
     POLICY_CHANGED: lambda p: PolicyChanged(p["policy"]),
     RECLASSIFIED_ON_STARTUP: lambda p: ReclassifiedOnStartup(p["fault_code"], p["reason"]),
+    GOAL_OUTCOME: lambda p: GoalOutcome(p["action"], p["goal_id"], p["status"],
+                                        p["server_node"]),
 }
 
 Upcaster = Callable[[dict[str, Any]], dict[str, Any]]

@@ -1,9 +1,11 @@
-"""The debounce policy (SPEC §4.1): global thresholds, sanitising, per-source prefix overrides."""
+"""The debounce policy (SPEC §4.1): global thresholds, sanitising, per-source prefix overrides,
+and per-fault-code pattern overrides (ours: the bridges' faults heal on their PASSED)."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from fnmatch import fnmatchcase
 from functools import cached_property
 from typing import Any, TypeVar
 
@@ -33,7 +35,8 @@ class DebounceParams:
 
 
 class SourceOverride(BaseModel):
-    """Any of the three debounce fields for sources under one prefix; unset fields inherit."""
+    """Any of the three debounce fields for sources under one prefix (or codes matching one
+    pattern); unset fields inherit."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
@@ -62,6 +65,10 @@ class Policy(BaseModel):
     healing_threshold: int = 3
     auto_confirm_after_sec: float = Field(default=0.0, ge=0.0)
     overrides: Mapping[str, SourceOverride] = Field(default_factory=dict)
+    code_overrides: Mapping[str, SourceOverride] = Field(default_factory=dict)
+    """Fault code glob (fnmatch, case-sensitive: ``HW_*``) -> debounce fields. Of the
+    patterns matching a code the most specific applies: the longest literal part before the
+    first wildcard, then the longest pattern. A source override's fields win over it."""
 
     @field_validator("confirmation_threshold")
     @classmethod
@@ -81,12 +88,25 @@ class Policy(BaseModel):
                 raise ValueError("an override prefix cannot be empty")
         return dict(sorted(value.items()))
 
+    @field_validator("code_overrides")
+    @classmethod
+    def _patterns(cls, value: Mapping[str, SourceOverride]) -> Mapping[str, SourceOverride]:
+        for pattern in value:
+            if not pattern or len(pattern) > 256:
+                raise ValueError("a code pattern must have 1 to 256 characters")
+        return dict(sorted(value.items()))
+
     @cached_property
     def _by_length(self) -> tuple[tuple[str, SourceOverride], ...]:
         return tuple(sorted(self.overrides.items(), key=lambda item: -len(item[0])))
 
     @cached_property
-    def _resolved(self) -> dict[str, DebounceParams]:
+    def _by_specificity(self) -> tuple[tuple[str, SourceOverride], ...]:
+        return tuple(sorted(self.code_overrides.items(),
+                            key=lambda item: (-len(_literal(item[0])), -len(item[0]), item[0])))
+
+    @cached_property
+    def _resolved(self) -> dict[str | tuple[str, str], DebounceParams]:
         return {}
 
     @property
@@ -104,20 +124,25 @@ class Policy(BaseModel):
                 return override
         return None
 
-    def resolve(self, source_id: str) -> DebounceParams:
-        cached = self._resolved.get(source_id)
+    def code_override_for(self, fault_code: str) -> SourceOverride | None:
+        """The most specific code pattern matching ``fault_code``, if any."""
+        for pattern, override in self._by_specificity:
+            if fnmatchcase(fault_code, pattern):
+                return override
+        return None
+
+    def resolve(self, source_id: str, fault_code: str = "") -> DebounceParams:
+        """Global values, then the code pattern's fields, then the source prefix's fields."""
+        key = (source_id, fault_code) if self.code_overrides else source_id
+        cached = self._resolved.get(key)
         if cached is not None:
             return cached
-        override = self.override_for(source_id)
         params = self.defaults
-        if override is not None:
-            params = DebounceParams(
-                _pick(override.confirmation_threshold, params.confirmation_threshold),
-                _pick(override.healing_enabled, params.healing_enabled),
-                _pick(override.healing_threshold, params.healing_threshold),
-            )
+        if self.code_overrides:
+            params = _apply(self.code_override_for(fault_code), params)
+        params = _apply(self.override_for(source_id), params)
         if len(self._resolved) < 10_000:
-            self._resolved[source_id] = params
+            self._resolved[key] = params
         return params
 
     def to_record(self) -> dict[str, Any]:
@@ -127,3 +152,19 @@ class Policy(BaseModel):
 
 def _pick(value: _T | None, fallback: _T) -> _T:
     return fallback if value is None else value
+
+
+def _apply(override: SourceOverride | None, params: DebounceParams) -> DebounceParams:
+    if override is None:
+        return params
+    return DebounceParams(
+        _pick(override.confirmation_threshold, params.confirmation_threshold),
+        _pick(override.healing_enabled, params.healing_enabled),
+        _pick(override.healing_threshold, params.healing_threshold),
+    )
+
+
+def _literal(pattern: str) -> str:
+    """The part of a glob before its first wildcard."""
+    cut = min((i for i, char in enumerate(pattern) if char in "*?["), default=len(pattern))
+    return pattern[:cut]

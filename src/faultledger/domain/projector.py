@@ -11,6 +11,7 @@ from faultledger.domain.events import (
     FaultCleared,
     FaultConfirmedByTimer,
     FaultReported,
+    GoalOutcome,
     LogRecord,
     PolicyChanged,
     ReclassifiedOnStartup,
@@ -146,9 +147,12 @@ class Projector:
         self.seq = record.seq
         event = record.event
         effect = self._apply(record, event)
-        if self.stats is not None and not isinstance(event, PolicyChanged):
-            fault = effect.fault or self.get(event.fault_code)
-            self.stats.observe(record, effect.transition, fault)
+        if self.stats is not None:
+            if isinstance(event, GoalOutcome):
+                self.stats.observe_goal(record, event)
+            elif not isinstance(event, PolicyChanged):
+                fault = effect.fault or self.get(event.fault_code)
+                self.stats.observe(record, effect.transition, fault)
         return effect
 
     def _apply(self, record: LogRecord, event: DomainEvent) -> Effect:
@@ -168,7 +172,7 @@ class Projector:
 
     def _reported(self, record: LogRecord, event: FaultReported) -> Effect:
         old = self.get(event.fault_code)
-        params = self.policy.resolve(event.source_id)
+        params = self.policy.resolve(event.source_id, event.fault_code)
         new = debounce.apply_report(old, event, params, record.occurred_at_ns)
         if new is None or new is old:
             return _NOTHING

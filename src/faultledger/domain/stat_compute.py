@@ -2,7 +2,7 @@
 
 Two ways in, one way out: ``from_facts`` reads individual facts and episodes (any filter or
 grouping, any bounds); ``from_sums`` takes per-period sums of the per-minute table (all
-codes, minute bounds).
+codes, whole minutes) plus the individual facts of a partial first and last minute.
 Both fill the same ``_Tally`` per row and finish it with ``_row``.
 """
 
@@ -16,8 +16,8 @@ from typing import Any
 
 from faultledger.domain.clock import NS_PER_SECOND, to_ns
 from faultledger.domain.shifts import Period
-from faultledger.domain.stat_rows import COUNT_METRICS, StatsRow
-from faultledger.domain.statistics import Episode, StatFact
+from faultledger.domain.stat_rows import COUNT_METRICS, GOAL_METRIC_OF, GOAL_METRICS, StatsRow
+from faultledger.domain.statistics import Episode, GoalFact, StatFact
 
 STALE_AFTER_NS = 24 * 3600 * NS_PER_SECOND
 FLOOD_WINDOW_NS = 600 * NS_PER_SECOND
@@ -26,6 +26,7 @@ FLOOD_ABOVE = 10
 TOP = 10
 NS_PER_MINUTE = 60 * NS_PER_SECOND
 _FLAGS = ("failed", "passed", "activation", "occurrence", "confirmation", "heal", "clear")
+_GOAL_INDEX = {status: GOAL_METRICS.index(metric) for status, metric in GOAL_METRIC_OF.items()}
 
 GroupKey = tuple[tuple[str, Any], ...]
 Span = tuple[str, int, int | None]
@@ -35,6 +36,8 @@ Span = tuple[str, int, int | None]
 @dataclass(slots=True)
 class _Tally:
     counts: list[int] = field(default_factory=lambda: [0] * len(_FLAGS))
+    goals: list[int] = field(default_factory=lambda: [0] * len(GOAL_METRICS))
+    """Goal outcomes per status, in GOAL_METRICS order."""
     active_ns: int = 0
     repairs: int = 0
     repair_ns: int = 0
@@ -50,8 +53,21 @@ class _Tally:
     stale_count: int | None = None
 
     def empty(self) -> bool:
-        return not (any(self.counts) or self.active_ns or self.repairs or self.chattering
-                    or self.stale)
+        return not (any(self.counts) or any(self.goals) or self.active_ns or self.repairs
+                    or self.chattering or self.stale)
+
+    def add_fact(self, fact: StatFact) -> None:
+        flags = (fact.failed, fact.passed, fact.activation, fact.occurrence, fact.confirmation,
+                 fact.heal, fact.clear)
+        self.counts = [a + b for a, b in zip(self.counts, flags, strict=True)]
+        if fact.confirmation:
+            self.windows[fact.at_ns // FLOOD_WINDOW_NS] += 1
+            self.by_code[fact.code] += 1
+        if fact.chatter:
+            self.chattering.add(fact.code)
+
+    def add_goal(self, goal: GoalFact) -> None:
+        self.goals[_GOAL_INDEX[goal.status]] += 1
 
 
 class _Bounds:
@@ -81,6 +97,11 @@ def _key(group_by: Sequence[str], code: str, source: str, severity: int) -> Grou
     return tuple((name, values[name]) for name in group_by)
 
 
+def _goal_key(group_by: Sequence[str], goal: GoalFact) -> GroupKey:
+    values = {"action": goal.action, "source": goal.server_node}
+    return tuple((name, values[name]) for name in group_by)
+
+
 def _episode_end(episode: Episode, as_of_ns: int) -> int:
     return episode.stop_ns(as_of_ns)
 
@@ -97,9 +118,20 @@ def _add_episode(tally: _Tally, bounds: _Bounds, i: int, episode: Episode, end: 
 
 def from_facts(periods: Sequence[Period], facts: Iterable[StatFact],
                episodes: Iterable[Episode], as_of_ns: int,
-               group_by: Sequence[str] = ()) -> list[StatsRow]:
-    """Rows from individual facts and episodes (already filtered to the selected codes)."""
+               group_by: Sequence[str] = (), goals: Iterable[GoalFact] = ()) -> list[StatsRow]:
+    """Rows from individual facts and episodes (already filtered to the selected codes) and
+    goal outcomes.
+
+    Fault figures and goal figures have different keys: with ``action`` in ``group_by``
+    the rows are per action and count goals only (a fault has no action); grouped by fault
+    keys only, they count faults only (a goal has no code or severity); ungrouped, both.
+    """
     bounds = _Bounds(periods)
+    by_action = "action" in group_by
+    if by_action:
+        facts, episodes = (), ()
+    elif group_by:
+        goals = ()
     tallies: list[dict[GroupKey, _Tally]] = [{} for _ in periods]
     if not group_by:
         for per_period in tallies:
@@ -115,15 +147,11 @@ def from_facts(periods: Sequence[Period], facts: Iterable[StatFact],
         i = bounds.index(fact.at_ns)
         if i is None:
             continue
-        tally = tally_for(i, _key(group_by, fact.code, fact.source, fact.severity))
-        flags = (fact.failed, fact.passed, fact.activation, fact.occurrence, fact.confirmation,
-                 fact.heal, fact.clear)
-        tally.counts = [a + b for a, b in zip(tally.counts, flags, strict=True)]
-        if fact.confirmation:
-            tally.windows[fact.at_ns // FLOOD_WINDOW_NS] += 1
-            tally.by_code[fact.code] += 1
-        if fact.chatter:
-            tally.chattering.add(fact.code)
+        tally_for(i, _key(group_by, fact.code, fact.source, fact.severity)).add_fact(fact)
+    for goal in goals:
+        i = bounds.index(goal.at_ns)
+        if i is not None:
+            tally_for(i, _goal_key(group_by, goal)).add_goal(goal)
     for episode in episodes:
         end = _episode_end(episode, as_of_ns)
         key = _key(group_by, episode.code, episode.source, episode.severity)
@@ -153,10 +181,11 @@ class PeriodSums:
 
     sums: Sequence[Sequence[int]]
     """Per period: i, the seven counts, starts, Σ starts·minute, Σ start offsets, ends,
-    Σ ends·minute, Σ end offsets, repairs, Σ repair ns (periods without minutes may be
-    missing)."""
+    Σ ends·minute, Σ end offsets, repairs, Σ repair ns, aborted, canceled and succeeded
+    goals, over the period's whole minutes (periods without minutes may be missing)."""
     busy_windows: Sequence[tuple[int, int, int]]
-    """(period i, 10-minute window, confirmations) of windows in flood."""
+    """(period i, 10-minute window, confirmations in whole minutes) of the windows that may
+    be in flood (the partial minutes' confirmations are added to them)."""
     top_confirmations: Mapping[int, int]
     chattering: Mapping[int, int]
     closed_open_at_start: int
@@ -164,10 +193,17 @@ class PeriodSums:
     open_spans: Sequence[Span]
     long_spans: Sequence[Span]
     """Ended episodes of 24 h or more that may be stale in the range."""
+    partial: Sequence[tuple[int, int]] = ()
+    """The ns ranges of a partial first and last minute, which ``sums`` leaves out."""
+    partial_facts: Sequence[StatFact] = ()
+    partial_goals: Sequence[GoalFact] = ()
+    partial_episodes: Sequence[Episode] = ()
+    """Episodes starting, or ending by a record, in ``partial`` (each once)."""
 
 
 def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> list[StatsRow]:
-    """Rows over all codes from per-period sums of the per-minute table.
+    """Rows over all codes from per-period sums of the per-minute table, plus the facts and
+    episode edges of a partial first and last minute.
 
     Active time per period [A, B) is Σ ends − Σ starts + B·open(B) − A·open(A), the sums
     running over the episode edges inside the period (docs/statistics.md).
@@ -186,6 +222,8 @@ def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> lis
                     ends, end_minutes * NS_PER_MINUTE + end_offsets]
         tally.repairs = row[14]
         tally.repair_ns = row[15]
+        tally.goals = list(row[16:19])
+    _add_partial(tallies, edges, bounds, data)
     first = bounds.starts[0]
     open_now = data.closed_open_at_start
     for _, start, _ in data.open_spans:
@@ -205,11 +243,46 @@ def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> lis
         tally.top = data.top_confirmations.get(i, 0)
         tally.chattering_count = data.chattering.get(i, 0)
     for i, window, count in data.busy_windows:
-        tallies[i].windows[window] = count
+        tallies[i].windows[window] += count
     stale = _stale_counts(bounds, (*data.long_spans, *data.open_spans), as_of_ns)
     for tally, count in zip(tallies, stale, strict=True):
         tally.stale_count = count
     return [_row(p, {}, tallies[i], bounds, i) for i, p in enumerate(periods)]
+
+
+def _add_partial(tallies: list[_Tally], edges: list[list[int]], bounds: _Bounds,
+                 data: PeriodSums) -> None:
+    """The figures of the partial first and last minute: counts, flood windows and goals from
+    the facts, episode starts, stops and repairs from the episodes."""
+
+    def partial(at_ns: int) -> int | None:
+        inside = any(a <= at_ns < b for a, b in data.partial)
+        return bounds.index(at_ns) if inside else None
+
+    for fact in data.partial_facts:
+        i = bounds.index(fact.at_ns)
+        if i is not None:  # (top codes and chattering come from the store for every path)
+            tallies[i].add_fact(fact)
+    for goal in data.partial_goals:
+        i = bounds.index(goal.at_ns)
+        if i is not None:
+            tallies[i].add_goal(goal)
+    for episode in data.partial_episodes:
+        i = partial(episode.start_ns)
+        if i is not None:
+            edges[i][0] += 1
+            edges[i][1] += episode.start_ns
+        if episode.end_ns is None:
+            continue
+        stop = episode.stop_ns(episode.end_ns)
+        i = partial(stop)
+        if i is not None:
+            edges[i][2] += 1
+            edges[i][3] += stop
+        i = partial(episode.end_ns)
+        if i is not None:
+            tallies[i].repairs += 1
+            tallies[i].repair_ns += episode.repair_ns
 
 
 def _stale_counts(bounds: _Bounds, spans: Iterable[Span], as_of_ns: int) -> list[int]:
@@ -279,4 +352,5 @@ def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
         chattering_codes=chattering,
         stale_codes=tally.stale_count if tally.stale_count is not None else len(tally.stale),
         top10_share=top / confirmations if confirmations else None,
+        **dict(zip(GOAL_METRICS, tally.goals, strict=True)),
     )

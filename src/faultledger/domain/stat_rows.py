@@ -7,11 +7,18 @@ from typing import Any
 
 from faultledger.domain.shifts import Period
 
-GROUP_KEYS = ("code", "source", "severity")
-"""What ``group_by`` may name."""
+GROUP_KEYS = ("code", "source", "severity", "action")
+"""What ``group_by`` may name. ``action`` groups goal outcomes (docs/statistics.md, Groups):
+it combines with ``source`` (the action server's node) only."""
+FAULT_KEYS = ("code", "severity")
+"""Group keys only faults have; ``action`` only goal outcomes have."""
 
 COUNT_METRICS = ("failed_reports", "passed_reports", "activations", "occurrences",
                  "confirmations", "heals", "clears")
+GOAL_METRICS = ("aborted_goals", "canceled_goals", "succeeded_goals")
+"""Goal outcome records per terminal status (never fault edges)."""
+GOAL_METRIC_OF = {"ABORTED": "aborted_goals", "CANCELED": "canceled_goals",
+                  "SUCCEEDED": "succeeded_goals"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,6 +48,9 @@ class StatsRow:
     chattering_codes: int = 0
     stale_codes: int = 0
     top10_share: float | None = None
+    aborted_goals: int = 0
+    canceled_goals: int = 0
+    succeeded_goals: int = 0
 
     @property
     def period_seconds(self) -> float:

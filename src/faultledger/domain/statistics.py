@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from faultledger.domain.events import FaultReported, LogRecord
+from faultledger.domain.events import FaultReported, GoalOutcome, LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.transition import Transition
 from faultledger.domain.types import EventType, FaultStatus
@@ -34,6 +34,17 @@ class StatFact(NamedTuple):
     heal: int = 0
     clear: int = 0
     chatter: int = 0
+
+
+class GoalFact(NamedTuple):
+    """One goal outcome record: the terminal status of one action goal."""
+
+    seq: int
+    at_ns: int
+    action: str
+    status: str
+    """SUCCEEDED, ABORTED or CANCELED."""
+    server_node: str
 
 
 class Episode(NamedTuple):
@@ -79,6 +90,12 @@ class StatsOutput(NamedTuple):
     ended: list[Episode]
     """Episodes that ended (with their start)."""
     tracks: dict[str, CodeTrack]
+    goals: list[GoalFact]
+    """Goal outcomes, in seq order."""
+
+
+def _empty_output() -> StatsOutput:
+    return StatsOutput([], [], [], {}, [])
 
 
 def is_chattering(times: tuple[int, ...]) -> bool:
@@ -91,10 +108,10 @@ class StatsFold:
     def __init__(self, tracks: dict[str, CodeTrack] | None = None) -> None:
         self._tracks: dict[str, CodeTrack] = dict(tracks or {})
         self._staged: dict[str, CodeTrack] | None = None
-        self._out = StatsOutput([], [], [], {})
+        self._out = _empty_output()
         self._started_at: dict[int, int] = {}
         """start_seq → index in ``_out.started`` (ending an episode finds it in O(1))."""
-        self._saved_len: tuple[int, int, int] | None = None
+        self._saved_len: tuple[int, int, int, int] | None = None
         self._saved_tracks: dict[str, CodeTrack] | None = None
 
     def track(self, code: str) -> CodeTrack:
@@ -111,7 +128,8 @@ class StatsFold:
     # -- staging (mirrors Projector) --------------------------------------------------------
     def stage(self) -> None:
         self._staged = {}
-        self._saved_len = (len(self._out.facts), len(self._out.started), len(self._out.ended))
+        self._saved_len = (len(self._out.facts), len(self._out.started), len(self._out.ended),
+                           len(self._out.goals))
         self._saved_tracks = dict(self._out.tracks)
 
     def commit(self) -> None:
@@ -123,10 +141,11 @@ class StatsFold:
 
     def rollback(self) -> None:
         if self._saved_len is not None and self._saved_tracks is not None:
-            facts, started, ended = self._saved_len
+            facts, started, ended, goals = self._saved_len
             del self._out.facts[facts:]
             del self._out.started[started:]
             del self._out.ended[ended:]
+            del self._out.goals[goals:]
             self._out.tracks.clear()
             self._out.tracks.update(self._saved_tracks)
             self._started_at = {e.start_seq: i for i, e in enumerate(self._out.started)}
@@ -137,10 +156,10 @@ class StatsFold:
     def take(self) -> StatsOutput:
         """Hand over (and forget) what was produced since the last call."""
         out = self._out
-        self._out = StatsOutput([], [], [], {})
+        self._out = _empty_output()
         self._started_at = {}
         if self._saved_len is not None:
-            self._saved_len = (0, 0, 0)
+            self._saved_len = (0, 0, 0, 0)
             self._saved_tracks = {}
         return out
 
@@ -152,6 +171,11 @@ class StatsFold:
         self._out.tracks[code] = track
 
     # -- the fold -----------------------------------------------------------------------------
+    def observe_goal(self, record: LogRecord, event: GoalOutcome) -> None:
+        """A goal outcome is its own fact: it touches no code's state."""
+        self._out.goals.append(GoalFact(record.seq, record.occurred_at_ns, event.action,
+                                        event.status, event.server_node))
+
     def observe(self, record: LogRecord, transition: Transition | None,
                 fault: Fault | None) -> None:
         event = record.event

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 import re
+import unicodedata
 from datetime import datetime
 
 from faultledger.domain.clock import MAX_NS, MIN_NS, TIME_RANGE_TEXT, in_range, to_ns
+from faultledger.domain.events import GOAL_STATUSES
 from faultledger.domain.types import EventType
 
 MAX_FAULT_CODE_LENGTH = 128
@@ -104,7 +106,8 @@ def time_error(name: str, moment: object) -> str | None:
 def ns_error(name: str, value: object) -> str | None:
     """A time given as integer nanoseconds since the epoch."""
     if isinstance(value, bool) or not isinstance(value, int):
-        return f"{name} must be nanoseconds since the epoch, got {shown(value)}"
+        return (f"{name} must be a timezone-aware datetime or nanoseconds since the epoch, got "
+                f"{shown(value)}")
     return None if MIN_NS <= value <= MAX_NS else range_message(name, f"{value} ns")
 
 
@@ -150,3 +153,35 @@ def entity_error(entity_id: str) -> str | None:
     if isinstance(entity_id, str) and not entity_id:
         return "entity_id cannot be empty"
     return text_error("entity_id", entity_id, MAX_SOURCE_ID_LENGTH)
+
+
+MAX_ACTION_LENGTH = 256
+MAX_GOAL_ID_LENGTH = 64
+MAX_SERVER_NODE_LENGTH = 256
+
+
+def _control_error(name: str, value: str) -> str | None:
+    """A name (ROS action, goal id) holds no control character: shown escaped, with where."""
+    for position, char in enumerate(value):
+        if unicodedata.category(char) == "Cc":
+            return (f"{name} contains a control character ({repr(char)[1:-1]}) at position "
+                    f"{position}")
+    return None
+
+
+def goal_outcome_error(action: object, goal_id: object, status: object,
+                       server_node: object) -> str | None:
+    """First problem with a goal outcome (action, goal id, status, server node); else None."""
+    for name, value, limit in (("action", action, MAX_ACTION_LENGTH),
+                               ("goal_id", goal_id, MAX_GOAL_ID_LENGTH)):
+        if isinstance(value, str) and not value:
+            return f"{name} cannot be empty"
+        problem = text_error(name, value, limit)  # type: ignore[arg-type]
+        if problem:
+            return problem
+        problem = _control_error(name, value)  # type: ignore[arg-type]
+        if problem:
+            return problem
+    if not isinstance(status, str) or status not in GOAL_STATUSES:
+        return f"status must be SUCCEEDED, ABORTED or CANCELED, got {shown(status)}"
+    return text_error("server_node", server_node, MAX_SERVER_NODE_LENGTH)  # type: ignore[arg-type]

@@ -17,18 +17,30 @@ from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.integrity import canonical_json
 from faultledger.domain.notifications import Notification
-from faultledger.domain.stat_rows import COUNT_METRICS, StatsRow
+from faultledger.domain.stat_rows import COUNT_METRICS, GOAL_METRICS, StatsRow
 from faultledger.errors import InvalidInputError
+from faultledger.service.requests import GoalOutcomeRequest
 
 NS_PER_MICROSECOND = 1_000
+TIME_MAX_SEC = 2**31 - 1
+"""builtin_interfaces/Time has an int32 ``sec``: its largest value is 2038-01-19T03:14:07Z."""
+TIME_MAX_NS = TIME_MAX_SEC * NS_PER_SECOND + NS_PER_SECOND - 1
+"""The largest time a Time can carry (sec=2147483647, nanosec=999999999). The log holds times
+up to 2262 (``clock.MAX_NS``); later ones are sent as this one (saturated, docs/ros.md)."""
+UINT32_MAX = 2**32 - 1
+UINT64_MAX = 2**64 - 1
 STATS_FLOATS = ("active_seconds", "confirmations_per_10min", "flood_seconds", "flood_percent")
-STATS_COUNTS = (*COUNT_METRICS, "repairs", "flood_windows", "chattering_codes", "stale_codes")
+STATS_COUNTS = (*COUNT_METRICS, "repairs", "flood_windows", "chattering_codes", "stale_codes",
+                *GOAL_METRICS)
 STATS_OPTIONAL = ("mttr_seconds", "mtbf_seconds", "top10_share")
 """Figures that may be undefined (None): NaN in the message."""
 
 
 def to_time(ns: int) -> Any:
-    seconds, nanoseconds = divmod(ns, NS_PER_SECOND)
+    """A Time for ``ns`` since the epoch, saturated to what a Time can carry: a time after
+    2038-01-19T03:14:07.999999999Z is sent as that one (never wrapped to 1901, never an error
+    for every caller), one before 1970 as zero."""
+    seconds, nanoseconds = divmod(min(max(ns, 0), TIME_MAX_NS), NS_PER_SECOND)
     return Time(sec=seconds, nanosec=nanoseconds)
 
 
@@ -36,15 +48,32 @@ def from_time(stamp: Any) -> int:
     return int(stamp.sec) * NS_PER_SECOND + int(stamp.nanosec)
 
 
+def request_ns(stamp: Any, name: str) -> int:
+    """A Time field of a request as ns since the epoch; zero means "not given". A negative
+    ``sec`` or a ``nanosec`` of a second or more is refused (``rclpy`` lets both through)."""
+    if int(stamp.sec) < 0:
+        raise InvalidInputError(f"{name} must not be before 1970 (sec >= 0), got "
+                                f"sec={stamp.sec}")
+    if not 0 <= int(stamp.nanosec) < NS_PER_SECOND:
+        raise InvalidInputError(f"{name}.nanosec must be below 1,000,000,000, got "
+                                f"nanosec={stamp.nanosec}")
+    return from_time(stamp)
+
+
+def _uint(value: int, top: int) -> int:
+    """A count for an unsigned field, saturated (a wrapped count would be a wrong number)."""
+    return min(max(int(value), 0), top)
+
+
 def fault_msg(fault: Fault) -> Any:
     return FaultMsg(
         fault_code=fault.fault_code,
-        severity=fault.severity,
+        severity=_uint(fault.severity, 255),
         description=fault.description,
         first_occurred=to_time(fault.first_occurred_ns),
         last_occurred=to_time(fault.last_occurred_ns),
         last_passed=to_time(fault.last_passed_ns),
-        occurrence_count=fault.occurrence_count,
+        occurrence_count=_uint(fault.occurrence_count, UINT32_MAX),
         status=fault.status.value,
         reporting_sources=list(fault.reporting_sources),
     )
@@ -61,17 +90,26 @@ def event_msg(notification: Notification) -> Any:
 
 def record_msg(record: LogRecord) -> Any:
     return LogRecordMsg(
-        seq=record.seq,
+        seq=_uint(record.seq, UINT64_MAX),
         event_id=record.event_id,
         kind=record.kind,
         fault_code=record.fault_code or "",
         source_id=record.source_id or "",
         occurred_at=to_time(record.occurred_at_ns),
         recorded_at=to_time(record.recorded_at_ns),
-        schema_version=record.schema_version,
+        schema_version=_uint(record.schema_version, UINT32_MAX),
         payload_json=canonical_json(record.payload),
         hash=record.hash,
     )
+
+
+def goal_outcome_request(request: Any) -> GoalOutcomeRequest:
+    """A ReportGoalOutcome request for ``FaultLedger.record_goal_outcomes``; a zero stamp is
+    "now" (the ledger's receive time). A bad stamp raises InvalidInputError (``request_ns``);
+    the ledger checks the rest."""
+    ns = request_ns(request.stamp, "stamp")
+    return GoalOutcomeRequest(request.action, request.goal_id, request.status,
+                              request.server_node, from_ns(ns) if ns else None)
 
 
 def stats_moment(stamp: Any, name: str) -> datetime | None:
@@ -80,7 +118,7 @@ def stats_moment(stamp: Any, name: str) -> datetime | None:
     Statistics work at microsecond resolution (datetimes): a stamp with a sub-microsecond part
     is refused rather than rounded, which could move a report across the bound.
     """
-    ns = from_time(stamp)
+    ns = request_ns(stamp, name)
     if ns == 0:
         return None
     if ns % NS_PER_MICROSECOND:
@@ -111,10 +149,11 @@ def stats_row_msg(row: StatsRow) -> Any:
         end=to_time(to_ns(period.end)),
         code=str(group.get("code", "")),
         source=str(group.get("source", "")),
-        severity=int(severity),
+        severity=min(max(int(severity), -(2**15)), 2**15 - 1),  # int16, saturated
+        action=str(group.get("action", "")),
     )
     for name in STATS_COUNTS:
-        setattr(msg, name, int(getattr(row, name)))
+        setattr(msg, name, _uint(getattr(row, name), UINT64_MAX))
     for name in STATS_FLOATS:
         setattr(msg, name, float(getattr(row, name)))
     for name in STATS_OPTIONAL:

@@ -1,19 +1,30 @@
 """The `fault_manager` node: ROS services and the events topic over one FaultLedger.
 
-Callbacks only translate: request → FaultLedger call → response. A report callback also takes
-the reports queued behind its own (service_queue.py), so a burst from many clients shares
-group commits although the executor runs one callback at a time.
+Callbacks only translate: request → FaultLedger call → response. A report (or goal outcome)
+callback also takes the requests queued behind its own (service_queue.py), so a burst from many
+clients shares group commits although the executor runs one callback at a time.
+
+Reads (list, get, history, statistics) run on a small thread pool (``ReadPool``): their
+callbacks are coroutines that await the pool's answer, so the executor thread keeps serving
+reports while a long statistics query computes. Every callback goes through ``guard.py``: an
+exception becomes a failed answer and one log line, never the end of the process.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import threading
+from collections.abc import Callable, Coroutine
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-from faultledger_msgs.srv import GetHistory, GetStatistics, ReportFaultOnce
+from faultledger_msgs.srv import GetHistory, GetStatistics, ReportFaultOnce, ReportGoalOutcome
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.service import Service
+from rclpy.task import Future
 from ros2_medkit_msgs.msg import FaultEvent
 from ros2_medkit_msgs.srv import (
     ClearFault,
@@ -25,11 +36,20 @@ from ros2_medkit_msgs.srv import (
 
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
-from faultledger.errors import FaultLedgerError
+from faultledger.errors import InvalidInputError
 from faultledger.ros import convert
+from faultledger.ros.guard import (
+    MESSAGE_LIMIT,
+    clip,
+    error_text,
+    fail,
+    guard_callback,
+    guard_service,
+    log_failure,
+)
 from faultledger.ros.service_queue import take_queued
 from faultledger.service.ledger import FaultLedger
-from faultledger.service.requests import ReportRequest
+from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
 from faultledger.service.results import ReportResult
 
 log = logging.getLogger(__name__)
@@ -40,6 +60,12 @@ SERVICE_QUEUE_DEPTH = 10_000
 storm is answered instead of silently dropped (the default depth is 10)."""
 HISTORY_LIMIT = 10_000
 """Most records one get_history answer carries; page with since/until."""
+READ_THREADS = 2
+"""Threads answering reads: a long statistics query leaves one for the others."""
+MAX_READS_IN_FLIGHT = 32
+"""Reads handed to the pool and not yet answered. Beyond it a read is answered on the executor
+thread (as every read was before the pool): a flood of reads slows the flood down instead of
+piling up coroutines that the executor polls on every turn."""
 
 SERVICE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=SERVICE_QUEUE_DEPTH,
                          reliability=ReliabilityPolicy.RELIABLE)
@@ -60,30 +86,120 @@ def declare_policy(node: Node, policy: Policy) -> Policy:
     return Policy.model_validate({**policy.model_dump(), **value})
 
 
+ServiceCallback = Callable[[Any, Any], Any]
+
+
+class ReadPool:
+    """Runs read callbacks on ``READ_THREADS`` threads; the executor awaits their answers.
+
+    ``offload(callback)`` is an ``async`` service callback: rclpy runs it as a task, which
+    yields while the pool works and sends the response when the coroutine returns. The
+    worker triggers a guard condition when done, so the executor wakes at once instead of
+    at its next timeout. ``callback`` must not raise (``guard_service``).
+    """
+
+    def __init__(self, node: Node, group: ReentrantCallbackGroup) -> None:
+        self._pool = ThreadPoolExecutor(READ_THREADS, thread_name_prefix="fault_manager_read")
+        self._lock = threading.Lock()
+        self._in_flight = 0
+        self._closed = False
+        self._wake = node.create_guard_condition(lambda: None, callback_group=group)
+
+    @property
+    def in_flight(self) -> int:
+        with self._lock:
+            return self._in_flight
+
+    def offload(self, callback: ServiceCallback
+                ) -> Callable[[Any, Any], Coroutine[Any, Any, Any]]:
+        async def offloaded(request: Any, response: Any) -> Any:
+            answer = self._submit(callback, request, response)
+            if answer is None:  # pool full or closed: answer here, as before the pool
+                return callback(request, response)
+            try:
+                return await answer
+            finally:
+                with self._lock:
+                    self._in_flight -= 1
+
+        return offloaded
+
+    def _submit(self, callback: ServiceCallback, request: Any, response: Any
+                ) -> Future | None:
+        with self._lock:
+            if self._closed or self._in_flight >= MAX_READS_IN_FLIGHT:
+                return None
+            self._in_flight += 1
+        answer = Future()
+
+        def work() -> None:
+            result: Any = None
+            try:
+                result = callback(request, response)
+            finally:
+                answer.set_result(result if result is not None
+                                  else fail(type(response)(), "internal error: no answer"))
+                with contextlib.suppress(Exception):  # destroyed at shutdown; answer is set
+                    self._wake.trigger()
+
+        try:
+            self._pool.submit(work)
+        except RuntimeError:  # shut down meanwhile
+            with self._lock:
+                self._in_flight -= 1
+            return None
+        return answer
+
+    def close(self) -> None:
+        """No new work; work not started yet is dropped (its callers are answered by nobody:
+        called once the executor stopped)."""
+        with self._lock:
+            self._closed = True
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
 class FaultManagerNode:
     """Services and publisher of `/fault_manager`, bound to an open ledger."""
 
     def __init__(self, node: Node, ledger: FaultLedger) -> None:
         self.node = node
         self.ledger = ledger
+        self.log = node.get_logger()
         self.events = node.create_publisher(FaultEvent, "~/events", EVENTS_QOS)
         self.report_service = node.create_service(
-            ReportFault, "~/report_fault", self.report_fault, qos_profile=SERVICE_QOS)
-        self.report_once_service = node.create_service(
-            ReportFaultOnce, "~/report_fault_once", self.report_fault_once,
+            ReportFault, "~/report_fault",
+            guard_service(self.report_fault, self.log, "report_fault"),
             qos_profile=SERVICE_QOS)
-        services: list[tuple[Any, str, Any]] = [
-            (ListFaults, "~/list_faults", self.list_faults),
-            (GetFault, "~/get_fault", self.get_fault),
-            (ClearFault, "~/clear_fault", self.clear_fault),
-            (ListFaultsForEntity, "~/list_faults_for_entity", self.list_faults_for_entity),
-            (GetHistory, "~/get_history", self.get_history),
-            (GetStatistics, "~/get_statistics", self.get_statistics),
+        self.report_once_service = node.create_service(
+            ReportFaultOnce, "~/report_fault_once",
+            guard_service(self.report_fault_once, self.log, "report_fault_once"),
+            qos_profile=SERVICE_QOS)
+        self.goal_service = node.create_service(
+            ReportGoalOutcome, "~/report_goal_outcome",
+            guard_service(self.report_goal_outcome, self.log, "report_goal_outcome"),
+            qos_profile=SERVICE_QOS)
+        self.clear_service = node.create_service(
+            ClearFault, "~/clear_fault",
+            guard_service(self.clear_fault, self.log, "clear_fault"), qos_profile=SERVICE_QOS)
+        # Reads: a reentrant group, so a read awaiting the pool holds up neither the reports
+        # (the node's default, mutually exclusive group) nor other reads.
+        self.read_group = ReentrantCallbackGroup()
+        self.reads = ReadPool(node, self.read_group)
+        reads: list[tuple[Any, str, ServiceCallback]] = [
+            (ListFaults, "list_faults", self.list_faults),
+            (GetFault, "get_fault", self.get_fault),
+            (ListFaultsForEntity, "list_faults_for_entity", self.list_faults_for_entity),
+            (GetHistory, "get_history", self.get_history),
+            (GetStatistics, "get_statistics", self.get_statistics),
         ]
-        self.services = [self.report_service, self.report_once_service, *(
-            node.create_service(kind, name, callback, qos_profile=SERVICE_QOS)
-            for kind, name, callback in services)]
-        self.subscription = ledger.subscribe(self.publish)
+        self.services = [self.report_service, self.report_once_service, self.goal_service,
+                         self.clear_service, *(
+            node.create_service(kind, f"~/{name}",
+                                self.reads.offload(guard_service(callback, self.log, name)),
+                                qos_profile=SERVICE_QOS, callback_group=self.read_group)
+            for kind, name, callback in reads)]
+        self.subscription = ledger.subscribe(
+            guard_callback(self.publish, self.log, "events publisher"))
 
     def publish(self, notification: Notification) -> None:
         """Called by the ledger after the change is durable, in log order."""
@@ -97,29 +213,76 @@ class FaultManagerNode:
 
     def _report_burst(self, service: Service, request: Any, response: Any,
                       idempotent: bool) -> Any:
-        """Make this report and every one queued behind it durable in shared commits."""
+        """Make this report and every one queued behind it durable in shared commits.
+
+        Every taken request is answered, whatever happens: an unexpected exception answers
+        them all ``accepted=false`` (one log line for the burst)."""
         queued = take_queued(service)
         requests = [request, *(r for r, _ in queued)]
-        results = self.ledger.report_many([
-            ReportRequest(r.fault_code, r.event_type, r.severity, r.description, r.source_id,
-                          event_id=r.event_id if idempotent else None)
-            for r in requests])
-        for r, result in zip(requests, results, strict=True):
-            if not result.accepted:
-                self.node.get_logger().warning(
-                    f"report of {r.fault_code!r} from {r.source_id!r} rejected: "
-                    f"{result.message}")
-        kind: Any = service.srv_type
-        for (_, header), result in zip(queued, results[1:], strict=True):
-            service.send_response(self._answer(kind.Response(), result), header)
+        name = "report_fault_once" if idempotent else "report_fault"
+        try:
+            results = self.ledger.report_many([
+                ReportRequest(r.fault_code, r.event_type, r.severity, r.description,
+                              r.source_id, event_id=r.event_id if idempotent else None)
+                for r in requests])
+        except Exception as error:
+            log_failure(self.log, name, error, f" ({len(requests)} report(s) not accepted)")
+            results = [ReportResult(False, error_text(error))] * len(requests)
+        else:
+            for r, result in zip(requests, results, strict=True):
+                if not result.accepted:
+                    self.log.warning(
+                        f"report of '{clip(r.fault_code)}' from '{clip(r.source_id)}' "
+                        f"rejected: {clip(result.message, MESSAGE_LIMIT)}")
+        self._answer_queued(service, queued, results[1:], name)
         return self._answer(response, results[0])
+
+    def report_goal_outcome(self, request: Any, response: Any) -> Any:
+        """Record this goal outcome and every one queued behind it in shared commits, like
+        ``_report_burst``; a request the ledger cannot take (a bad stamp, an unknown status)
+        is answered ``accepted=false`` on its own."""
+        service = self.goal_service
+        queued = take_queued(service)
+        requests = [request, *(r for r, _ in queued)]
+        name = "report_goal_outcome"
+        results: list[ReportResult | None] = []
+        valid: list[GoalOutcomeRequest] = []
+        for r in requests:
+            try:
+                valid.append(convert.goal_outcome_request(r))
+                results.append(None)
+            except InvalidInputError as error:
+                results.append(ReportResult(False, error_text(error)))
+        try:
+            recorded = iter(self.ledger.record_goal_outcomes(valid))
+        except Exception as error:
+            log_failure(self.log, name, error, f" ({len(valid)} goal outcome(s) not accepted)")
+            recorded = iter([ReportResult(False, error_text(error))] * len(valid))
+        answers = [result if result is not None else next(recorded) for result in results]
+        for r, result in zip(requests, answers, strict=True):
+            if not result.accepted:
+                self.log.warning(
+                    f"goal outcome of '{clip(r.action)}' goal '{clip(r.goal_id)}' from "
+                    f"'{clip(r.server_node)}' rejected: {clip(result.message, MESSAGE_LIMIT)}")
+        self._answer_queued(service, queued, answers[1:], name)
+        return self._answer(response, answers[0])
+
+    def _answer_queued(self, service: Service, queued: list[tuple[Any, Any]],
+                       results: list[ReportResult], name: str) -> None:
+        """Answer the requests a callback took from the queue (``take_queued``)."""
+        kind: Any = service.srv_type
+        for (_, header), result in zip(queued, results, strict=True):
+            try:
+                service.send_response(self._answer(kind.Response(), result), header)
+            except Exception as error:  # one lost answer must not cost the others theirs
+                log_failure(self.log, f"{name} (answering a queued request)", error)
 
     @staticmethod
     def _answer(response: Any, result: ReportResult) -> Any:
         response.accepted = result.accepted
-        if hasattr(response, "duplicate"):  # ReportFaultOnce
+        if hasattr(response, "duplicate"):  # ReportFaultOnce, ReportGoalOutcome
             response.duplicate = result.duplicate
-            response.message = "" if result.accepted else result.message
+            response.message = "" if result.accepted else clip(result.message, MESSAGE_LIMIT)
         return response
 
     def list_faults(self, request: Any, response: Any) -> Any:
@@ -156,39 +319,34 @@ class FaultManagerNode:
         return response
 
     def get_history(self, request: Any, response: Any) -> Any:
-        since, until = convert.from_time(request.since), convert.from_time(request.until)
+        """Refused input raises InvalidInputError: ``guard_service`` answers success=false."""
+        since = convert.request_ns(request.since, "since")
+        until = convert.request_ns(request.until, "until")
         limit = min(request.limit or HISTORY_LIMIT, HISTORY_LIMIT)
-        try:
-            records = self.ledger.history(
-                code=request.fault_code or None, source=request.source_id or None,
-                since=since or None, until=until or None,
-                kinds=list(request.kinds), limit=limit)
-        except FaultLedgerError as error:
-            response.success = False
-            response.error_message = str(error)
-            return response
+        records = self.ledger.history(
+            code=request.fault_code or None, source=request.source_id or None,
+            since=since or None, until=until or None,
+            kinds=list(request.kinds), limit=limit)
         response.success = True
         response.records = [convert.record_msg(r) for r in records]
         return response
 
     def get_statistics(self, request: Any, response: Any) -> Any:
-        """``FaultLedger.stats`` in the ledger's calendar; refused input → success=false."""
-        try:
-            rows = self.ledger.stats(
-                by=request.by or "shift",
-                since=convert.stats_bound(request.since, request.since_time, "since"),
-                until=convert.stats_bound(request.until, request.until_time, "until"),
-                codes=list(request.codes) or None, group_by=list(request.group_by),
-                as_of=convert.stats_moment(request.as_of, "as_of"))
-        except FaultLedgerError as error:
-            response.success = False
-            response.message = str(error)
-            return response
+        """``FaultLedger.stats`` in the ledger's calendar; refused input (InvalidInputError) →
+        success=false with its message (``guard_service``)."""
+        rows = self.ledger.stats(
+            by=request.by or "shift",
+            since=convert.stats_bound(request.since, request.since_time, "since"),
+            until=convert.stats_bound(request.until, request.until_time, "until"),
+            codes=list(request.codes) or None, group_by=list(request.group_by),
+            as_of=convert.stats_moment(request.as_of, "as_of"))
         response.success = True
         response.rows = [convert.stats_row_msg(row) for row in rows]
         return response
 
     def close(self) -> None:
+        """Once the executor stopped (``serve`` first lets reads in flight finish)."""
         self.subscription.cancel()
+        self.reads.close()
         for service in self.services:
             self.node.destroy_service(service)

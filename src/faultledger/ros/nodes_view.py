@@ -22,6 +22,7 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from faultledger.cli.safe_text import cell
 from faultledger.ros.bridges.node_state import QOS, node_state_type
 from faultledger.ros.bridges.node_state_mapping import (
     ERROR,
@@ -33,6 +34,7 @@ from faultledger.ros.bridges.node_state_mapping import (
     STOPPING,
     WARNING,
 )
+from faultledger.ros.guard import guard_callback
 
 STATE_STYLES: dict[int, str] = {
     STARTING: "cyan", STOPPING: "dim", RUNNING: "green", ERROR: "bold red",
@@ -69,11 +71,12 @@ class NodesView:
             message.nodename, message.package, message.nodetype, int(message.state),
             message.machine_message, message.human_message, time.monotonic())
 
-    def table(self, now: float | None = None) -> Table:
+    def rows(self, now: float | None = None) -> list[list[Text]]:
+        """The table's cells, one list per node in name order. Names, package, type and
+        messages come from any publisher: shown literally (``safe_text.cell``: never markup,
+        control characters escaped, one line per node)."""
         now = time.monotonic() if now is None else now
-        table = Table(title=f"nodes on /nodemon/state ({len(self.nodes)})", expand=False)
-        for column in ("node", "package", "type", "state", "age", "message"):
-            table.add_column(column, no_wrap=column in ("node", "state", "age"))
+        rows: list[list[Text]] = []
         for seen in sorted(self.nodes.values(), key=lambda s: s.nodename):
             age = now - seen.received
             name = STATE_NAMES.get(seen.state, f"UNKNOWN({seen.state})")
@@ -82,9 +85,17 @@ class NodesView:
                 message = f"{message} [{seen.machine_message}]" if message \
                     else seen.machine_message
             stale = age > STALE_SEC and seen.state != STOPPING
-            table.add_row(seen.nodename, seen.package, seen.nodetype,
-                          Text(name, style=STATE_STYLES.get(seen.state, "magenta")),
-                          Text(f"{age:.1f} s", style="red" if stale else ""), message)
+            rows.append([cell(seen.nodename), cell(seen.package), cell(seen.nodetype),
+                         cell(name, STATE_STYLES.get(seen.state, "magenta")),
+                         cell(f"{age:.1f} s", "red" if stale else None), cell(message)])
+        return rows
+
+    def table(self, now: float | None = None) -> Table:
+        table = Table(title=f"nodes on /nodemon/state ({len(self.nodes)})", expand=False)
+        for column in ("node", "package", "type", "state", "age", "message"):
+            table.add_column(column, no_wrap=column in ("node", "state", "age"))
+        for row in self.rows(now):
+            table.add_row(*row)
         return table
 
 
@@ -98,7 +109,8 @@ def run_nodes_view(topic: str, once: bool, listen_sec: float, ros_args: list[str
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     view = NodesView()
-    node.create_subscription(node_state_type(), topic, view.on_state, QOS)
+    node.create_subscription(node_state_type(), topic,
+                             guard_callback(view.on_state, node.get_logger(), topic), QOS)
     try:
         if once:
             deadline = time.monotonic() + listen_sec

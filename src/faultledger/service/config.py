@@ -13,6 +13,8 @@ from faultledger.domain.shifts import ShiftCalendar
 from faultledger.errors import ConfigError
 
 DEFAULT_DATABASE_URL = "sqlite:///var/faultledger.db"
+MAX_CONFIG_BYTES = 1024 * 1024
+"""A configuration file larger than this is refused unread (a wrong path, /dev/zero)."""
 M = TypeVar("M", bound=BaseModel)
 
 
@@ -22,6 +24,22 @@ class DatabaseSettings(BaseModel):
     url: str = DEFAULT_DATABASE_URL
     max_batch: int = Field(default=512, ge=1, le=100_000)
     """Most reports one group commit may carry."""
+
+
+class AnchorSettings(BaseModel):
+    """Signed anchors of the log head (docs/operations.md, "Verify (tamper evidence)")."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    key: Path | None = None
+    """Ed25519 private key (PEM) `serve` signs anchors with; keep it outside the database."""
+    public_key: Path | None = None
+    """The trusted public key `verify` checks anchors with."""
+    directory: Path | None = None
+    """Where `serve` writes an anchor every ``interval_sec`` (with ``key``); never created."""
+    interval_sec: float = Field(default=3600.0, gt=0)
+    keep: int | None = Field(default=None, ge=1)
+    """Newest anchor files `serve` keeps in ``directory``; None: all."""
 
 
 class Settings(BaseModel):
@@ -35,6 +53,7 @@ class Settings(BaseModel):
     shifts: Path | None = None
     """Shift calendar YAML (see config/shifts.yaml) for statistics, relative to the working
     directory; None: the built-in default calendar (UTC, three 8-hour shifts)."""
+    anchors: AnchorSettings = Field(default_factory=AnchorSettings)
 
 
 def load_settings(path: Path | None) -> Settings:
@@ -51,22 +70,32 @@ def load_shift_calendar(path: Path) -> ShiftCalendar:
 
 def _load(path: Path, model: type[M], what: str) -> M:
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as file:
+            raw = file.read(MAX_CONFIG_BYTES + 1)
+        if len(raw) > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{what} {path} is larger than {MAX_CONFIG_BYTES // 1024} KiB; "
+                              "is it the right file?")
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise ConfigError(f"cannot read {what} {path}: {error}") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as error:
         raise ConfigError(f"{what} {path} is not valid YAML: {error}") from None
+    except RecursionError:
+        raise ConfigError(f"{what} {path} is nested too deeply") from None
     if data is None:
         data = {}
     if not isinstance(data, dict):
         raise ConfigError(f"{what} {path} must contain a mapping at the top level")
     try:
         return model.model_validate(data)
+    except RecursionError:
+        raise ConfigError(f"{what} {path} is nested too deeply") from None
     except ValidationError as error:
+        found = error.errors()
         problems = "; ".join(
             f"{'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}"
-            for e in error.errors()
-        )
+            for e in found[:5]
+        ) + (f"; and {len(found) - 5} more" if len(found) > 5 else "")
         raise ConfigError(f"{what} {path} is invalid: {problems}") from None

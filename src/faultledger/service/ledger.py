@@ -15,7 +15,14 @@ from sqlalchemy import Connection
 
 from faultledger.domain import queries, validation
 from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
-from faultledger.domain.events import KINDS, FaultCleared, FaultReported, LogRecord
+from faultledger.domain.events import (
+    KINDS,
+    FaultCleared,
+    FaultReported,
+    GoalOutcome,
+    LogRecord,
+    goal_event_id,
+)
 from faultledger.domain.fault import Fault
 from faultledger.domain.notifications import Notification
 from faultledger.domain.periods import default_calendar
@@ -24,9 +31,9 @@ from faultledger.domain.projector import Projector, Transition
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import StatsRow
 from faultledger.domain.statistics import StatsFold
-from faultledger.errors import FaultLedgerError, InvalidInputError
+from faultledger.errors import DamagedDatabaseError, FaultLedgerError, InvalidInputError
 from faultledger.service import statistics
-from faultledger.service.requests import ReportRequest
+from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
 from faultledger.service.results import (
     ClearResult,
     Downtime,
@@ -42,12 +49,14 @@ from faultledger.service.writer import (
     ConfirmOverdue,
     Exclusive,
     ReclassifyHealed,
+    RecordGoal,
     RecordPolicy,
     Report,
     Writer,
+    clipped,
 )
 from faultledger.store import event_log, integrity_check, migrate, projections, stat_tables
-from faultledger.store.database import Database
+from faultledger.store.database import Database, describe
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +112,14 @@ class FaultLedger:
         try:
             migrate.ensure_current(db, upgrade=upgrade)
             projector, restored = _restore(db)
+        except FaultLedgerError:
+            db.dispose()
+            raise
+        except Exception as error:  # stored content this code cannot read: damage, not a bug
+            db.dispose()
+            raise DamagedDatabaseError(
+                f"database {describe(url)} cannot be restored ({clipped(error)}): its content "
+                "is damaged or was edited; restore a backup") from error
         except BaseException:
             db.dispose()
             raise
@@ -161,18 +178,32 @@ class FaultLedger:
         For a caller that receives reports in bursts (a ROS service draining its queue, a
         bridge translating one message into many reports): one wait instead of one per report.
         """
-        results: list[ReportResult | None] = []
-        commands: list[Command] = []
-        for request in requests:
-            command = _report_command(request)
-            results.append(command if isinstance(command, ReportResult) else None)
-            if not isinstance(command, ReportResult):
-                commands.append(command)
+        return self._submit_checked([_report_command(request) for request in requests])
+
+    def record_goal_outcome(self, action: str, goal_id: str, status: str, server_node: str = "",
+                            at: datetime | None = None) -> ReportResult:
+        """Record the terminal status (SUCCEEDED, ABORTED, CANCELED) of one action goal.
+
+        Once per (action, goal_id): a repeat is answered accepted and ``duplicate`` and
+        stores nothing. The record changes no fault and announces nothing; the statistics
+        count it (``aborted_goals`` ...). Returns once it is durable (or rejected).
+        """
+        return self.record_goal_outcomes(
+            [GoalOutcomeRequest(action, goal_id, status, server_node, at)])[0]
+
+    def record_goal_outcomes(self, requests: Sequence[GoalOutcomeRequest]
+                             ) -> list[ReportResult]:
+        """Record several goal outcomes in order, sharing commits; one result per request."""
+        return self._submit_checked([_goal_command(request) for request in requests])
+
+    def _submit_checked(self, checked: list[Command | ReportResult]) -> list[ReportResult]:
+        """Submit the valid commands together; a rejection stays in its request's place."""
+        commands = [c for c in checked if not isinstance(c, ReportResult)]
         try:
             answers = iter(self._writer.submit_all(commands))
         except FaultLedgerError as error:
             answers = iter([ReportResult(False, str(error))] * len(commands))
-        return [result if result is not None else next(answers) for result in results]
+        return [c if isinstance(c, ReportResult) else next(answers) for c in checked]
 
     def clear(self, fault_code: str, actor: str = "api", reason: str = "",
               at: datetime | None = None) -> ClearResult:
@@ -537,6 +568,22 @@ def _report_command(request: ReportRequest) -> Report | ReportResult:
                   request.event_id is not None)
 
 
+def _goal_command(request: GoalOutcomeRequest) -> RecordGoal | ReportResult:
+    """The writer's command for a valid goal outcome, else the rejection naming the problem
+    (checked before it joins a group commit, like a report)."""
+    if not isinstance(request, GoalOutcomeRequest):
+        return ReportResult(False, f"expected a GoalOutcomeRequest, got {type(request).__name__}")
+    problem = validation.goal_outcome_error(request.action, request.goal_id, request.status,
+                                            request.server_node)
+    if problem is None and request.at is not None:
+        problem = validation.time_error("at", request.at)
+    if problem is not None:
+        return ReportResult(False, problem)
+    occurred_ns = time.time_ns() if request.at is None else to_ns(request.at)
+    event = GoalOutcome(request.action, request.goal_id, request.status, request.server_node)
+    return RecordGoal(event, occurred_ns, goal_event_id(request.action, request.goal_id))
+
+
 # -- audit: filtered and streamed history, verification of a segment, prefixes by time -------
 def export_history(ledger: FaultLedger, code: str | None = None,
                    since: datetime | int | None = None, until: datetime | int | None = None,
@@ -647,13 +694,13 @@ def _record_filter(code: str | None, since: datetime | int | None, until: dateti
                    ) -> event_log.RecordFilter:
     """A checked history filter: bad input is an InvalidInputError naming it, never a silently
     empty answer (a misspelt kind would otherwise look like "nothing happened")."""
-    wanted = (kinds,) if isinstance(kinds, str) else tuple(kinds)
+    wanted = _strings(kinds, "kinds")
     unknown = [kind for kind in wanted if kind not in KINDS]
     if unknown:
         named = ", ".join(validation.shown(kind, 40) for kind in unknown[:5])
         raise InvalidInputError(f"unknown record kind {named}; valid "
                                 f"kinds: {', '.join(KINDS)}")
-    patterns = (codes,) if isinstance(codes, str) else tuple(codes or ())
+    patterns = _strings(codes, "codes")
     if len(patterns) > statistics.MAX_PATTERNS:
         raise InvalidInputError(f"codes takes at most {statistics.MAX_PATTERNS} patterns")
     for name, value, size in (*(("a code pattern", c, statistics.MAX_PATTERN_LENGTH)
@@ -670,6 +717,19 @@ def _record_filter(code: str | None, since: datetime | int | None, until: dateti
         until_ns=_bound_ns(until, "until"), kinds=wanted, limit=limit, codes=patterns,
         from_seq=from_seq, to_seq=to_seq,
     )
+
+
+def _strings(value: Iterable[str] | str | None, name: str) -> tuple[str, ...]:
+    """One string or a collection of them as a tuple; anything else is refused by name."""
+    if value is None:
+        return ()
+    if isinstance(value, str):
+        return (value,)
+    if not isinstance(value, list | tuple | set | frozenset) or len(value) > 10_000 or not all(
+            isinstance(item, str) for item in value):
+        raise InvalidInputError(f"{name} must be a list of strings, got "
+                                f"{validation.shown(value)}")
+    return tuple(value)
 
 
 def _check_limit(limit: int | None) -> None:
@@ -699,12 +759,12 @@ def _check_seq_range(from_seq: int | None, to_seq: int | None) -> None:
 def _bound_ns(moment: datetime | int | None, name: str) -> int | None:
     if moment is None:
         return None
-    if isinstance(moment, int) and not isinstance(moment, bool):
-        problem = validation.ns_error(name, moment)
-        if problem:
-            raise InvalidInputError(problem)
-        return moment
-    return _aware_ns(moment, name)
+    if isinstance(moment, datetime):
+        return _aware_ns(moment, name)
+    problem = validation.ns_error(name, moment)
+    if problem:
+        raise InvalidInputError(problem)
+    return moment
 
 
 def _aware_ns(moment: datetime, name: str) -> int:

@@ -1,4 +1,5 @@
-"""Inputs of the service API that travel in batches (``FaultLedger.report_many``)."""
+"""Inputs of the service API that travel in batches (``FaultLedger.report_many``,
+``FaultLedger.record_goal_outcomes``)."""
 
 from __future__ import annotations
 
@@ -16,3 +17,14 @@ class ReportRequest(NamedTuple):
     source_id: str = ""
     at: datetime | None = None
     event_id: str | None = None
+
+
+class GoalOutcomeRequest(NamedTuple):
+    """The arguments of ``FaultLedger.record_goal_outcome``, as one value."""
+
+    action: str
+    goal_id: str
+    status: str
+    """SUCCEEDED, ABORTED or CANCELED."""
+    server_node: str = ""
+    at: datetime | None = None

@@ -10,10 +10,11 @@ from fnmatch import fnmatchcase
 from sqlalchemy import Connection
 
 from faultledger.domain import stat_compute, validation
-from faultledger.domain.clock import MIN_TIME, NS_PER_SECOND, from_ns, to_ns
+from faultledger.domain.clock import MAX_TIME, MIN_TIME, NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.periods import PERIOD_KINDS, parse_bound, periods
 from faultledger.domain.shifts import Period, ShiftCalendar
-from faultledger.domain.stat_rows import GROUP_KEYS, StatsRow
+from faultledger.domain.stat_rows import FAULT_KEYS, GROUP_KEYS, StatsRow
+from faultledger.domain.statistics import Episode
 from faultledger.errors import InvalidInputError
 from faultledger.store import stat_tables
 from faultledger.store.database import Database
@@ -27,6 +28,15 @@ MAX_PATTERNS = 256
 MAX_PATTERN_LENGTH = 256
 _STEP_NS = {"10min": 600 * NS_PER_SECOND, "hour": 3600 * NS_PER_SECOND,
             "day": 86_400 * NS_PER_SECOND}
+NS_PER_MINUTE = 60 * NS_PER_SECOND
+NS_PER_MICROSECOND = 1_000
+
+
+def open_end_ns(as_of_ns: int) -> int:
+    """Where a range with no ``until`` ends: just after ``as_of`` (the start of the next
+    microsecond, as a datetime can hold it), so what happened at ``as_of`` itself, also a
+    report stamped with the very datetime given as ``as_of``, is counted."""
+    return min((as_of_ns // NS_PER_MICROSECOND + 1) * NS_PER_MICROSECOND, to_ns(MAX_TIME))
 
 
 class StatsQuery:
@@ -47,17 +57,16 @@ class StatsQuery:
             _check_time(as_of, "as_of")
             self.as_of_ns = to_ns(as_of)
         until_at = (_bound(until, calendar, upper=True) if until is not None
-                    else from_ns(self.as_of_ns - self.as_of_ns % (60 * NS_PER_SECOND)))
+                    else from_ns(open_end_ns(self.as_of_ns)))
         since_at = (_bound(since, calendar, upper=False) if since is not None
                     else max(until_at - DEFAULT_SPAN, MIN_TIME))
         if since_at >= until_at:
             raise InvalidInputError(f"since ({since_at.isoformat()}) must be before until "
                                     f"({until_at.isoformat()})")
         self.since_ns, self.until_ns = to_ns(since_at), to_ns(until_at)
-        step = _STEP_NS.get(by)
-        if step is not None and (self.until_ns - self.since_ns) // step > MAX_PERIODS:
-            raise InvalidInputError(_too_many(f"about {(self.until_ns - self.since_ns) // step:,}",
-                                              by))
+        estimate = _estimate(by, since_at, until_at, calendar)
+        if estimate > MAX_PERIODS * 1.1:  # clearly too many: refused before cutting any
+            raise InvalidInputError(_too_many(f"about {estimate:,}", by))
         self.periods: list[Period] = periods(by, since_at, until_at, calendar, MAX_PERIODS)
         if len(self.periods) > MAX_PERIODS:
             raise InvalidInputError(_too_many(f"more than {MAX_PERIODS:,}", by))
@@ -65,10 +74,24 @@ class StatsQuery:
     def selects(self, code: str) -> bool:
         return self.codes is None or any(fnmatchcase(code, glob) for glob in self.codes)
 
-    def minute_aligned(self) -> bool:
-        minute = 60 * NS_PER_SECOND
-        return self.since_ns % minute == 0 and self.until_ns % minute == 0 and all(
-            to_ns(p.start) % minute == 0 for p in self.periods)
+    def inner_minute_aligned(self) -> bool:
+        """Every period edge but ``since`` and ``until`` lies on a whole minute (the minute
+        table serves the whole minutes; a partial first and last minute is read from facts)."""
+        return all(to_ns(p.start) % NS_PER_MINUTE == 0 for p in self.periods[1:])
+
+
+def _estimate(by: str, since: datetime, until: datetime, calendar: ShiftCalendar) -> int:
+    """Periods in [since, until), from the range's length (clock periods) or from the number
+    of shift periods in its first week: cheap, so a huge range costs nothing to refuse."""
+    span = to_ns(until) - to_ns(since)
+    step = _STEP_NS.get(by)
+    if step is not None:
+        return span // step
+    week = timedelta(days=7)
+    if span <= 2 * week.total_seconds() * NS_PER_SECOND:
+        return 0  # cut exactly below
+    per_week = len(periods(by, since, since + week, calendar, MAX_PERIODS))
+    return int(span / (week.total_seconds() * NS_PER_SECOND) * per_week)
 
 
 def _too_many(count: str, by: str) -> str:
@@ -85,6 +108,9 @@ def _group_by(group_by: Sequence[str]) -> tuple[str, ...]:
             len(set(names)) != len(names)):
         raise InvalidInputError(f"group_by takes distinct names from {', '.join(GROUP_KEYS)}, "
                                 f"got {validation.shown(list(names))}")
+    if "action" in names and any(key in names for key in FAULT_KEYS):
+        raise InvalidInputError("group_by action combines only with source: a goal outcome "
+                                "has no code or severity")
     return names
 
 
@@ -125,34 +151,63 @@ def _bound(value: datetime | str, calendar: ShiftCalendar, *, upper: bool) -> da
 
 
 def compute(db: Database, query: StatsQuery) -> list[StatsRow]:
-    """Per-minute sums when the question allows it (all codes, no grouping, whole minutes),
-    else the individual facts of the selected codes; both are exact."""
+    """Per-minute sums when the question allows it (all codes, no grouping, inner period
+    edges on whole minutes), else the individual facts of the selected codes; both exact.
+
+    Goal outcomes have no fault code: ``codes`` does not select them (docs/statistics.md).
+    """
     if not query.periods:
         return []
     with db.reading() as conn:
-        if query.codes is None and not query.group_by and query.minute_aligned():
+        if query.codes is None and not query.group_by and query.inner_minute_aligned():
             return stat_compute.from_sums(query.periods, _sums(conn, query), query.as_of_ns)
-        only = None
-        if query.codes is not None:
-            only = [code for code in stat_tables.codes(conn) if query.selects(code)]
-        facts = stat_tables.facts(conn, query.since_ns, query.until_ns, only)
-        episodes = stat_tables.episodes(conn, query.since_ns, query.until_ns, only)
+        goals = []
+        if not query.group_by or "action" in query.group_by:
+            goals = stat_tables.goals(conn, query.since_ns, query.until_ns)
+        facts, episodes = [], []
+        if "action" not in query.group_by:
+            only = None
+            if query.codes is not None:
+                only = [code for code in stat_tables.codes(conn) if query.selects(code)]
+            facts = stat_tables.facts(conn, query.since_ns, query.until_ns, only)
+            episodes = stat_tables.episodes(conn, query.since_ns, query.until_ns, only)
     return stat_compute.from_facts(query.periods, facts, episodes, query.as_of_ns,
-                                   query.group_by)
+                                   query.group_by, goals)
+
+
+def _whole_minutes(since_ns: int, until_ns: int) -> tuple[int, int, list[tuple[int, int]]]:
+    """The whole minutes [a, b) of [since, until) in ns, and the partial rest as ns ranges."""
+    first = -(-since_ns // NS_PER_MINUTE) * NS_PER_MINUTE
+    last = until_ns // NS_PER_MINUTE * NS_PER_MINUTE
+    if first >= last:
+        return first, first, [(since_ns, until_ns)]
+    return first, last, [(a, b) for a, b in ((since_ns, first), (last, until_ns)) if a < b]
 
 
 def _sums(conn: Connection, query: StatsQuery) -> stat_compute.PeriodSums:
-    minute = 60 * NS_PER_SECOND
     edges = [(to_ns(p.start), to_ns(p.end)) for p in query.periods]
-    minutes = [(a // minute, b // minute) for a, b in edges]
+    first, last, partial = _whole_minutes(query.since_ns, query.until_ns)
+    minutes = []
+    for a, b in edges:  # inner edges are whole minutes (``inner_minute_aligned``)
+        begin = max(a, first)
+        minutes.append((begin // NS_PER_MINUTE, max(begin, min(b, last)) // NS_PER_MINUTE))
+    facts = [f for a, b in partial for f in stat_tables.facts(conn, a, b, None)]
+    goals = [g for a, b in partial for g in stat_tables.goals(conn, a, b)]
+    episodes: dict[int, Episode] = {}
+    for a, b in partial:
+        episodes.update((e.start_seq, e) for e in stat_tables.edge_episodes(conn, a, b))
+    partial_confirmations = sum(f.confirmation for f in facts)
     return stat_compute.PeriodSums(
         sums=stat_tables.period_sums(conn, minutes),
         busy_windows=stat_tables.busy_windows(
-            conn, minutes, stat_compute.FLOOD_WINDOW_NS // minute, stat_compute.FLOOD_ABOVE),
+            conn, minutes, stat_compute.FLOOD_WINDOW_NS // NS_PER_MINUTE,
+            stat_compute.FLOOD_ABOVE - partial_confirmations),
         top_confirmations=stat_tables.top_confirmations(conn, edges, stat_compute.TOP),
         chattering=stat_tables.chattering(conn, edges),
         closed_open_at_start=stat_tables.closed_open_at(conn, query.since_ns),
         open_spans=stat_tables.open_spans(conn),
         long_spans=stat_tables.long_spans(conn, query.since_ns, query.until_ns,
                                           stat_compute.STALE_AFTER_NS),
+        partial=partial, partial_facts=facts, partial_goals=goals,
+        partial_episodes=list(episodes.values()),
     )

@@ -26,6 +26,7 @@ from faultledger.domain.events import (
     FaultCleared,
     FaultConfirmedByTimer,
     FaultReported,
+    GoalOutcome,
     LogRecord,
     PolicyChanged,
     ReclassifiedOnStartup,
@@ -34,6 +35,7 @@ from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Effect, Projector, Transition
 from faultledger.errors import (
+    DatabaseFullError,
     FaultLedgerError,
     LedgerClosedError,
     StoreError,
@@ -63,6 +65,16 @@ class Clear:
 
 
 @dataclass(frozen=True, slots=True)
+class RecordGoal:
+    """A goal outcome; its event_id is derived from (action, goal id), so a repeat of the
+    same goal is recognised and stored once."""
+
+    event: GoalOutcome
+    occurred_ns: int
+    event_id: str
+
+
+@dataclass(frozen=True, slots=True)
 class ConfirmOverdue:
     now_ns: int
 
@@ -89,7 +101,8 @@ class Exclusive:
     action: Callable[[Connection, Writer], Any]
 
 
-Command = Report | Clear | ConfirmOverdue | ReclassifyHealed | RecordPolicy | CatchUp | Exclusive
+Command = (Report | Clear | RecordGoal | ConfirmOverdue | ReclassifyHealed | RecordPolicy
+           | CatchUp | Exclusive)
 
 
 def _held_lock() -> threading.Lock:
@@ -180,6 +193,8 @@ class Writer:
         self._closed = False
         self._policy_checked: Policy | None = None
         self._head: tuple[int, str] | None = None
+        self._reclaim = False
+        """Set by "disk full": checkpoint and truncate the WAL before the next commit."""
         self.commits = 0
 
     def submit(self, command: Command) -> Any:
@@ -280,6 +295,10 @@ class Writer:
         of one of them; should one still raise something unexpected, every command of the
         group is committed alone, so only the culprit fails (isolation as a last resort).
         """
+        if self._reclaim:
+            self._reclaim = not self._connection.reclaim()
+        elif self._connection.low_space and self.commits % 100 == 0:
+            self._connection.check_space()
         try:
             try:
                 batch = self._write(group)
@@ -288,6 +307,15 @@ class Writer:
                 batch = self._write(group)
         except FaultLedgerError as error:
             self._head = None
+            if isinstance(error, DatabaseFullError):
+                self._reclaim = not self._connection.reclaim()
+            if len(group) > 1 and isinstance(error, WriteConflictError):
+                # Still conflicting after catching up: a constraint one command breaks.
+                log.warning("commit of %d commands failed (%s); committing each alone",
+                            len(group), clipped(error))
+                for pending in group:
+                    self._commit([pending])
+                return
             self._fail(group, error)
             return
         except Exception as error:  # a bug must not leave callers waiting forever
@@ -329,7 +357,8 @@ class Writer:
                     self._head = event_log.head(conn)
                     self._catch_up(conn, self._head[0])
                 ids = [p.command.event_id for p in group
-                       if isinstance(p.command, Report) and p.command.explicit_id]
+                       if (isinstance(p.command, Report) and p.command.explicit_id)
+                       or isinstance(p.command, RecordGoal)]
                 known = event_log.existing_event_ids(conn, ids)
                 for pending in group:
                     pending.result = self._build(pending.command, batch, known, conn)
@@ -351,7 +380,7 @@ class Writer:
     @staticmethod
     def _fail(group: list[_Pending], error: FaultLedgerError) -> None:
         for pending in group:
-            if isinstance(pending.command, Report):
+            if isinstance(pending.command, Report | RecordGoal):
                 pending.result = ReportResult(False, str(error))
             elif isinstance(pending.command, Clear):
                 pending.result = ClearResult(False, str(error))
@@ -387,6 +416,8 @@ class Writer:
         projector = self.projector
         if isinstance(command, Report):
             return self._report(command, batch, known)
+        if isinstance(command, RecordGoal):
+            return self._goal(command, batch, known)
         if isinstance(command, Clear):
             code = command.event.fault_code
             if projector.get(code) is None:
@@ -413,18 +444,30 @@ class Writer:
             return projector.seq
         return command.action(conn, self)
 
+    @staticmethod
+    def _goal(command: RecordGoal, batch: _Batch, known: set[str]) -> ReportResult:
+        """A goal outcome is appended as it is: it depends on no policy and changes no fault,
+        so it records no policy and announces nothing."""
+        if command.event_id in known:
+            return ReportResult(True, "duplicate: this goal's outcome is already recorded",
+                                event_id=command.event_id, duplicate=True)
+        seq = batch.add(command.event, command.occurred_ns, command.event_id)
+        known.add(command.event_id)
+        return ReportResult(True, f"recorded as seq {seq}", seq, command.event_id)
+
     def _report(self, command: Report, batch: _Batch, known: set[str]) -> ReportResult:
         if command.explicit_id and command.event_id in known:
             return ReportResult(True, "duplicate: this event_id is already recorded",
                                 event_id=command.event_id, duplicate=True)
         event = command.event
         fault = self.projector.get(event.fault_code)
-        if debounce.is_ignored(fault, event):
-            why = "no such fault" if fault is None else "the fault is CLEARED"
-            return ReportResult(True, f"accepted; nothing to record ({why})")
         self._ensure_policy(batch)
         seq = batch.add(event, command.occurred_ns, command.event_id)
         known.add(command.event_id)
+        if debounce.is_ignored(fault, event):  # logged all the same (SPEC §3): the full record
+            why = "no such fault" if fault is None else "the fault is CLEARED"
+            return ReportResult(True, f"recorded as seq {seq}; changes no fault ({why})", seq,
+                                command.event_id)
         return ReportResult(True, f"recorded as seq {seq}", seq, command.event_id)
 
 

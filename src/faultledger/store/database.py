@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 import sqlite3
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,6 +22,15 @@ from faultledger.errors import (
 )
 
 BUSY_TIMEOUT_MS = 5_000
+JOURNAL_SIZE_LIMIT = 4 * 1024 * 1024
+"""Bytes a WAL file keeps after a checkpoint (SQLite's default auto-checkpoint size): the WAL
+never stays larger than that, so a disk that was full gets its space back."""
+LOW_SPACE_CHECKPOINT_PAGES = 16
+"""WAL pages between checkpoints once the disk was full (SQLite's default is 1000, 4 MiB):
+each commit appends whole pages to the WAL, so on a nearly full disk the WAL itself would
+take the space freed for new records."""
+LOW_SPACE_UNTIL_FREE = 64 * 1024 * 1024
+"""Free bytes on the database's file system that end the low-space mode."""
 
 
 def _sqlite_file(url: str) -> Path | None:
@@ -54,6 +64,8 @@ class Database:
             if not create and not self.path.exists():
                 raise StoreError(f"database file {self.path} does not exist")
             self.path.parent.mkdir(parents=True, exist_ok=True)
+            if create:
+                _create_private(self.path)
         try:
             self.engine: Engine = create_engine(url)
         except (exc.ArgumentError, exc.NoSuchModuleError) as error:
@@ -86,6 +98,8 @@ class WriteConnection:
         self._db = db
         self._conn: Connection | None = None
         self._data_version: int | None = None
+        self.low_space = False
+        """After "disk full": checkpoint every few pages until the disk has room again."""
 
     def others_committed(self, conn: Connection) -> bool:
         """Whether another connection committed since this one last looked (SQLite's
@@ -106,11 +120,50 @@ class WriteConnection:
                 if self._conn is None:
                     self._conn = self._db.engine.connect().execution_options(
                         faultledger_write=True)
+                    self._checkpoint_every(LOW_SPACE_CHECKPOINT_PAGES if self.low_space
+                                           else None)
                 with self._conn.begin():
                     yield self._conn
         except BaseException:
             self.close()
             raise
+
+    def _checkpoint_every(self, pages: int | None) -> None:
+        if self._db.dialect == "sqlite" and self._conn is not None:
+            driver: Any = self._conn.connection.driver_connection
+            driver.execute(f"PRAGMA wal_autocheckpoint = {pages or 1000}")
+
+    def check_space(self) -> None:
+        """In low-space mode, leave it once the file system has room again."""
+        path = self._db.path
+        if not self.low_space or path is None:
+            return
+        try:
+            stat = os.statvfs(path.parent)
+        except OSError:
+            return
+        if stat.f_bavail * stat.f_frsize >= LOW_SPACE_UNTIL_FREE:
+            self.low_space = False
+            with contextlib.suppress(Exception):
+                self._checkpoint_every(None)
+
+    def reclaim(self) -> bool:
+        """Copy the WAL into the database and truncate it (after "disk full": the WAL only
+        grows until a checkpoint, so freed space alone would let a few commits through), and
+        checkpoint often from now on (low-space mode). True when the WAL is now empty; on
+        any error it is tried again before the next commit."""
+        if self._db.dialect != "sqlite":
+            return True
+        self.low_space = True
+        with contextlib.suppress(Exception):
+            self._checkpoint_every(LOW_SPACE_CHECKPOINT_PAGES)
+        try:
+            with translate_errors(self._db.url), self._db.engine.connect() as conn:
+                driver: Any = conn.connection.driver_connection
+                busy, _, _ = driver.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
+        except StoreError:
+            return False
+        return not busy
 
     def close(self) -> None:
         self._data_version = None
@@ -120,6 +173,30 @@ class WriteConnection:
             self._conn = None
 
 
+DATABASE_MODE = 0o600
+"""A new database file's mode; SQLite gives its -wal, -shm and -journal files the same."""
+
+
+def _create_private(path: Path) -> None:
+    """Create ``path`` empty with mode 0600 (whatever the umask) before SQLite opens it, so
+    the fault log is never readable by other users. An existing file keeps its mode; a name
+    that exists by the time we look (another process, a symlink) is left to SQLite as is."""
+    if path.exists():
+        return
+    flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY | getattr(os, "O_NOFOLLOW", 0)
+    try:
+        fd = os.open(path, flags, DATABASE_MODE)
+    except FileExistsError:
+        return
+    except OSError as error:
+        raise StoreError(f"cannot create database file {path}: "
+                         f"{error.strerror or error}") from None
+    try:
+        os.fchmod(fd, DATABASE_MODE)  # exactly 0600: os.open's mode was masked by the umask
+    finally:
+        os.close(fd)
+
+
 def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
     dbapi_connection.isolation_level = None  # we issue BEGIN ourselves (see _sqlite_begin)
     cursor = dbapi_connection.cursor()
@@ -127,6 +204,7 @@ def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
     with contextlib.suppress(sqlite3.OperationalError):  # a read-only file keeps its mode
         cursor.execute("PRAGMA journal_mode = WAL")
     cursor.execute("PRAGMA synchronous = FULL")
+    cursor.execute(f"PRAGMA journal_size_limit = {JOURNAL_SIZE_LIMIT}")
     # Statistics join a VALUES list of periods to time ranges; with many periods SQLite's
     # planner would build a throw-away automatic index instead of using ours (50× slower).
     cursor.execute("PRAGMA automatic_index = OFF")

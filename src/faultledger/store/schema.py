@@ -144,11 +144,29 @@ stat_minutes = Table(
     Column("end_offset_ns", BigInteger, nullable=False),
     Column("repairs", Integer, nullable=False),
     Column("repair_ns", BigInteger, nullable=False),
+    Column("aborted_goals", Integer, nullable=False, server_default="0"),
+    Column("canceled_goals", Integer, nullable=False, server_default="0"),
+    Column("succeeded_goals", Integer, nullable=False, server_default="0"),
 )
 """Sums per minute of ``at_ns`` (minute = at_ns // 60e9). Episode starts and ends keep their
 offsets within the minute, so active time over whole minutes is exact. Repairs count in
 the minute of the record that ended the episode; ``ends`` in the minute where its time in
-CONFIRMED stops (later, when the reporter's clock ran backwards)."""
+CONFIRMED stops (later, when the reporter's clock ran backwards). The goal columns (Alembic
+0003) count goal outcome records by status."""
+
+stat_goals = Table(
+    "stat_goals",
+    metadata,
+    Column("seq", SeqType, primary_key=True, autoincrement=False),
+    Column("at_ns", BigInteger, nullable=False),
+    Column("action", String(256), nullable=False),
+    Column("status", String(16), nullable=False),
+    Column("server_node", Text, nullable=False),
+)
+"""One row per goal outcome record (Alembic 0003): what the goal figures are counted from
+when a query groups by action or its range does not end on a whole minute."""
+Index("ix_stat_goals_at", stat_goals.c.at_ns)
+Index("ix_stat_goals_action_at", stat_goals.c.action, stat_goals.c.at_ns)
 
 stat_codes = Table(
     "stat_codes",

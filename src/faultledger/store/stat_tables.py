@@ -20,7 +20,8 @@ from sqlalchemy import (
     text,
 )
 
-from faultledger.domain.statistics import CodeTrack, Episode, StatFact, StatsOutput
+from faultledger.domain.stat_rows import GOAL_METRIC_OF, GOAL_METRICS
+from faultledger.domain.statistics import CodeTrack, Episode, GoalFact, StatFact, StatsOutput
 from faultledger.store import fastpath
 from faultledger.store.dialects import upsert, upsert_add
 from faultledger.store.schema import (
@@ -28,6 +29,7 @@ from faultledger.store.schema import (
     stat_codes,
     stat_episodes,
     stat_facts,
+    stat_goals,
     stat_minutes,
 )
 
@@ -37,6 +39,7 @@ created them, so the first open fills them from the whole log)."""
 NS_PER_MINUTE = 60 * 1_000_000_000
 _FLAGS = ("failed", "passed", "activation", "occurrence", "confirmation", "heal", "clear")
 _INSERT_FACT = stat_facts.insert()
+_INSERT_GOAL = stat_goals.insert()
 _CODE_CHUNK = 500
 
 
@@ -48,6 +51,11 @@ def _fact_row(fact: StatFact) -> dict[str, Any]:
         "confirmation": fact.confirmation, "heal": fact.heal, "clear": fact.clear,
         "chatter": fact.chatter,
     }
+
+
+def _goal_row(goal: GoalFact) -> dict[str, Any]:
+    return {"seq": goal.seq, "at_ns": goal.at_ns, "action": goal.action,
+            "status": goal.status, "server_node": goal.server_node}
 
 
 def _episode_row(episode: Episode) -> dict[str, Any]:
@@ -73,9 +81,12 @@ def _minute_rows(output: StatsOutput) -> list[dict[str, Any]]:
         if row is None:
             row = sums[minute] = dict.fromkeys(
                 (*_FLAGS, "starts", "start_offset_ns", "ends", "end_offset_ns", "repairs",
-                 "repair_ns"), 0)
+                 "repair_ns", *GOAL_METRICS), 0)
         return minute, row
 
+    for goal in output.goals:
+        _, row = bucket(goal.at_ns)
+        row[GOAL_METRIC_OF[goal.status]] += 1
     for fact in output.facts:
         _, row = bucket(fact.at_ns)
         for flag in _FLAGS:
@@ -109,6 +120,7 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
     """Write one output and move the statistics checkpoint, in the caller's transaction."""
     dialect = conn.dialect.name
     fastpath.execute_many(conn, _INSERT_FACT, [_fact_row(f) for f in output.facts])
+    fastpath.execute_many(conn, _INSERT_GOAL, [_goal_row(g) for g in output.goals])
     episodes = {e.start_seq: e for e in output.started}
     episodes.update((e.start_seq, e) for e in output.ended)
     fastpath.execute_many(conn, upsert(stat_episodes, dialect),
@@ -122,7 +134,7 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
 
 def replace_all(conn: Connection, output: StatsOutput, seq: int) -> None:
     """Drop the statistics and write a full replay's output (``rebuild``, upgrade)."""
-    for table in (stat_facts, stat_episodes, stat_minutes, stat_codes):
+    for table in (stat_facts, stat_episodes, stat_minutes, stat_codes, stat_goals):
         conn.execute(delete(table))
     save(conn, output, seq)
 
@@ -160,14 +172,16 @@ def _periods(edges: Sequence[tuple[int, int]], unit: str) -> Any:
 
 def period_sums(conn: Connection, minute_edges: Sequence[tuple[int, int]]) -> list[tuple[int, ...]]:
     """Per period i (bounds in whole minutes): i, the seven counts, starts, Σ starts·minute,
-    Σ start offsets, ends, Σ ends·minute, Σ end offsets, repairs, Σ repair ns."""
+    Σ start offsets, ends, Σ ends·minute, Σ end offsets, repairs, Σ repair ns, aborted,
+    canceled and succeeded goals."""
     p = _periods(minute_edges, "minute")
     m = stat_minutes.c
     query = (
         select(p.c.i, *(func.sum(m[flag]) for flag in _FLAGS),
                func.sum(m.starts), func.sum(m.starts * m.minute), func.sum(m.start_offset_ns),
                func.sum(m.ends), func.sum(m.ends * m.minute), func.sum(m.end_offset_ns),
-               func.sum(m.repairs), func.sum(m.repair_ns))
+               func.sum(m.repairs), func.sum(m.repair_ns),
+               *(func.sum(m[name]) for name in GOAL_METRICS))
         .select_from(p.join(stat_minutes, and_(m.minute >= p.c.a, m.minute < p.c.b)))
         .group_by(p.c.i)
     )
@@ -274,6 +288,23 @@ def facts(conn: Connection, since_ns: int, until_ns: int,
     return found
 
 
+def goals(conn: Connection, since_ns: int, until_ns: int) -> list[GoalFact]:
+    """Goal outcomes in [since, until) (through ix_stat_goals_at)."""
+    query = select(stat_goals).where(stat_goals.c.at_ns >= since_ns,
+                                     stat_goals.c.at_ns < until_ns)
+    return [GoalFact(*row) for row in fastpath.fetch_all_rendered(conn, query)]
+
+
+def edge_episodes(conn: Connection, since_ns: int, until_ns: int) -> list[Episode]:
+    """Episodes that start, or whose ending record lies, in [since, until): the episode edges
+    of a part of a minute (the minute table holds whole minutes)."""
+    e = stat_episodes.c
+    query = select(stat_episodes).where(or_(
+        and_(e.start_ns >= since_ns, e.start_ns < until_ns),
+        and_(e.end_ns >= since_ns, e.end_ns < until_ns)))
+    return [Episode(*row) for row in fastpath.fetch_all_rendered(conn, query)]
+
+
 def episodes(conn: Connection, since_ns: int, until_ns: int,
              only: Sequence[str] | None) -> list[Episode]:
     """Episodes that overlap [since, until) or are still open (the caller ends those)."""
@@ -318,4 +349,8 @@ def differences(conn: Connection, replayed: StatsOutput) -> list[str]:
         problems.append("stat_minutes")
     if load_tracks(conn) != replayed.tracks:
         problems.append("stat_codes")
+    stored_goals = [GoalFact(*row) for row in conn.execute(
+        select(stat_goals).order_by(stat_goals.c.seq))]
+    if stored_goals != replayed.goals:
+        problems.append("stat_goals")
     return [f"{name} differs from a full replay of the log" for name in problems]

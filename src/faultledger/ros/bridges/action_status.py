@@ -1,4 +1,5 @@
-"""Action-status bridge: every ``*/_action/status`` → ``<PREFIX>_<ACTION>_ABORTED``/``_CANCELED``.
+"""Action-status bridge: every ``*/_action/status`` → ``<PREFIX>_<ACTION>_ABORTED``/``_CANCELED``,
+and one goal outcome record per finished goal.
 
 Works for any action server (Nav2, MoveIt 2, ros2_control controllers, custom ones) because it
 only reads the standard status topic. Actions are found by scanning the graph every
@@ -10,6 +11,7 @@ healed first when it was failed and healing is on). The mapping itself lives in
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,8 +25,13 @@ from faultledger.ros.bridges.action_status_mapping import (
     STATUS_NAMES,
     STATUS_TYPE,
     TERMINAL,
+    UPPER_SNAKE,
+    WHOLE_ARRAY,
     ActionTracker,
     Goal,
+    GoalOutcome,
+    Judge,
+    RecordedGoals,
     Rules,
     SeenGoals,
     Transition,
@@ -32,7 +39,9 @@ from faultledger.ros.bridges.action_status_mapping import (
     goal_text,
     is_watched,
     status_name,
+    upper_snake,
 )
+from faultledger.ros.guard import guard_callback
 from faultledger.ros.reporter import FaultReporter
 
 NODE_NAME = "faultledger_action_status_bridge"
@@ -59,13 +68,27 @@ class Settings(BaseModel):
     """config/action_status.yaml; docs/bridges/action_status.md."""
 
     rescan_period_sec: float = Field(default=2.0, gt=0)
-    code_prefix: str = Field(default="ACTION", pattern=r"^[A-Za-z0-9_-]{1,32}$")
+    code_prefix: str = Field(default="ACTION", max_length=32,
+                             pattern=rf"^{UPPER_SNAKE.pattern}$")
     aborted_severity: int = Field(default=2, ge=0, le=3)
     canceled_is_fault: bool = False
     heal_on_succeeded: bool = True
+    judge: Judge = WHOLE_ARRAY
     exclude_actions: list[str] = Field(default_factory=list)
     include_only_actions: list[str] = Field(default_factory=list)
     dedup_capacity: int = Field(default=4096, ge=1)
+
+    @classmethod
+    def prepare_settings(cls, values: dict[str, Any], warn: Callable[[str], None]) -> None:
+        """A ``code_prefix`` not in upper snake case (``acc-d``, ``Nav Stack``) is converted
+        with a warning (``ACC_D``, ``NAV_STACK``); one with nothing to convert is left to
+        validation (default with a warning)."""
+        value = values.get("code_prefix")
+        if isinstance(value, str) and not UPPER_SNAKE.fullmatch(value):
+            converted = upper_snake(value)
+            if converted:
+                warn(f"code_prefix={value!r} is not upper snake case; using {converted!r}")
+                values["code_prefix"] = converted
 
 
 def node_fqn(namespace: str, name: str) -> str:
@@ -74,10 +97,11 @@ def node_fqn(namespace: str, name: str) -> str:
 
 @dataclass
 class _Pending:
-    """Transitions of one action waiting for its server's name (kept in order)."""
+    """Transitions and goal outcomes of one action waiting for its server's name (in order)."""
 
     since: float
     transitions: list[Transition] = field(default_factory=list)
+    outcomes: list[GoalOutcome] = field(default_factory=list)
 
 
 class Bridge:
@@ -90,15 +114,18 @@ class Bridge:
         self._reporter = reporter
         self._tracker = ActionTracker(Rules(settings.code_prefix, settings.aborted_severity,
                                             settings.canceled_is_fault,
-                                            settings.heal_on_succeeded))
+                                            settings.heal_on_succeeded, settings.judge))
         self._seen = SeenGoals(settings.dedup_capacity)
+        self._recorded = RecordedGoals(settings.dedup_capacity)
         self._subscriptions: dict[str, Any] = {}
         self._sources: dict[str, str] = {}  # action → its server's node FQN, once known
         self._pending: dict[str, _Pending] = {}
         self._skipped: set[str] = set()  # filtered-out actions, logged once
         self._rescan()
-        self._timer = node.create_timer(settings.rescan_period_sec, self._rescan)
-        self._pending_timer = node.create_timer(PENDING_CHECK_SEC, self._flush_all)
+        self._timer = node.create_timer(
+            settings.rescan_period_sec, guard_callback(self._rescan, self._log, "rescan"))
+        self._pending_timer = node.create_timer(
+            PENDING_CHECK_SEC, guard_callback(self._flush_all, self._log, "pending reports"))
 
     def close(self) -> None:
         self._node.destroy_timer(self._timer)
@@ -149,9 +176,11 @@ class Bridge:
         def on_status(message: Any) -> None:
             self._on_status(action, message)
 
+        name = f"{action}/_action/status"
         self._subscriptions[action] = self._node.create_subscription(
-            GoalStatusArray, f"{action}/_action/status", on_status, STATUS_QOS,
-            event_callbacks=SubscriptionEventCallbacks(incompatible_qos=on_incompatible))
+            GoalStatusArray, name, guard_callback(on_status, self._log, name), STATUS_QOS,
+            event_callbacks=SubscriptionEventCallbacks(
+                incompatible_qos=guard_callback(on_incompatible, self._log, name)))
         server = self._sources.get(action, "not known yet")
         self._log.info(f"watching action {action} (server {server})")
 
@@ -165,13 +194,15 @@ class Bridge:
 
     # -- status arrays ----------------------------------------------------------------------------
     def _on_status(self, action: str, message: Any) -> None:
+        received_ns = time.time_ns()
         goals: list[Goal] = []
         for goal in message.status_list:
             goal_id = bytes(bytearray(goal.goal_info.goal_id.uuid))
             status = int(goal.status)
             goals.append((goal_id, status))
             self._note(action, goal_id, status)
-        self._report(action, self._tracker.observe(action, goals))
+        self._report(action, self._tracker.observe(action, goals),
+                     self._recorded.new_outcomes(action, goals, received_ns))
 
     def _note(self, action: str, goal_id: bytes, status: int) -> None:
         """Log each goal's terminal (or invalid) status once."""
@@ -186,11 +217,13 @@ class Bridge:
             self._log.info(text)
 
     # -- reports --------------------------------------------------------------------------------
-    def _report(self, action: str, transitions: list[Transition]) -> None:
+    def _report(self, action: str, transitions: list[Transition],
+                outcomes: list[GoalOutcome] | None = None) -> None:
         """Send now when the server's name is known, else hold (in order) until it is."""
-        if transitions:
+        if transitions or outcomes:
             pending = self._pending.setdefault(action, _Pending(time.monotonic()))
             pending.transitions.extend(transitions)
+            pending.outcomes.extend(outcomes or ())
         self._flush(action)
 
     def _flush_all(self) -> None:
@@ -206,13 +239,18 @@ class Bridge:
             source = self._server(f"{action}/_action/status")[1]
             if source is not None:
                 self._sources[action] = source
+        server = source or ""  # goal outcomes: empty when the server's node is not known
         if source is None:
             if not force and time.monotonic() - pending.since < SOURCE_WAIT_SEC:
                 return
             source = action
             self._log.warning(f"action {action}: the node of its server is not known; "
-                              f"reporting with source_id {action}")
+                              f"reporting with source_id {action} (goal outcomes without a "
+                              f"server node)")
         del self._pending[action]
+        for outcome in pending.outcomes:
+            self._reporter.report_goal_outcome(outcome.action, outcome.goal_id, outcome.status,
+                                               server_node=server, stamp_ns=outcome.stamp_ns)
         for transition in pending.transitions:
             if transition.passed:
                 self._reporter.report_passed(transition.code, source_id=source)

@@ -1,18 +1,28 @@
-"""Action status → fault transitions: the pure part of the action-status bridge (no rclpy).
+"""Action status → fault transitions and goal outcomes: the pure part of the action-status
+bridge (no rclpy).
 
 An action server publishes ``/<action>/_action/status`` (``action_msgs/GoalStatusArray``) on
 every goal state change: the status of every goal it still remembers (rcl_action keeps finished
 goals for ``result_timeout``, 15 minutes by default). The bridge turns those arrays into one
 edge-triggered state per action, so a robot that retries a failing goal ten times gets one
-FAILED, and one PASSED once a goal finally succeeds.
+FAILED, and one PASSED once the action is judged healthy again.
 
-Which goals count: those whose status is new compared with the previous array received for the
-action (every goal of the first array). Because a server republishes its finished goals in every
-array, judging the *whole* array would keep an action failed for as long as one old ABORTED goal
-is remembered, and a retry that succeeds would never heal it. Among the goals that count, any
-ABORTED (or CANCELED when ``canceled_is_fault``) makes the action failed, in whatever order they
-appear; else any terminal goal makes it healthy; else (only ACCEPTED/EXECUTING/CANCELING/UNKNOWN,
-unknown values, or nothing new) the state stays as it was.
+Which goals are judged (``Rules.judge``):
+
+* ``whole_array`` (default; the seed semantics of SPEC §8, a drop-in for ros2_medkit's bridge):
+  every goal of the array. As long as the server still remembers an ABORTED goal the action is
+  failed, so a success heals only once the aborted goals have left the array.
+* ``new_goals``: the goals whose status is new compared with the previous array received for
+  the action (every goal of the first array). A success heals at once, even while old ABORTED
+  goals are still remembered.
+
+Among the goals judged, any ABORTED (or CANCELED when ``canceled_is_fault``) makes the action
+failed, in whatever order they appear; else any terminal goal makes it healthy; else (only
+ACCEPTED/EXECUTING/CANCELING/UNKNOWN, unknown values, an empty array, or nothing new) the state
+stays as it was.
+
+Separately from the faults, each goal's terminal status becomes one goal outcome record
+(``RecordedGoals``), whatever the judgement: aborts are counted per goal.
 """
 
 from __future__ import annotations
@@ -24,6 +34,7 @@ from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import Literal
 
 STATUS_TOPIC_SUFFIX = "/_action/status"
 STATUS_TYPE = "action_msgs/msg/GoalStatusArray"
@@ -51,6 +62,10 @@ MAX_GOALS_IN_DESCRIPTION = 5
 Goal = tuple[bytes, int]
 """(goal_id uuid bytes, status) as carried by one GoalStatus."""
 
+Judge = Literal["whole_array", "new_goals"]
+WHOLE_ARRAY: Judge = "whole_array"
+NEW_GOALS: Judge = "new_goals"
+
 
 def status_name(status: int) -> str:
     return STATUS_NAMES.get(status, f"INVALID({status})")
@@ -70,6 +85,8 @@ def action_of_topic(topic: str) -> str | None:
 
 _CAMEL = re.compile(r"(?<=[a-z0-9])(?=[A-Z])")
 _NON_ALNUM = re.compile(r"[^A-Za-z0-9]+")
+UPPER_SNAKE = re.compile(r"[A-Z0-9]+(?:_[A-Z0-9]+)*")
+"""What ``upper_snake`` yields (and what a ``code_prefix`` must be)."""
 
 
 def upper_snake(action: str) -> str:
@@ -155,6 +172,7 @@ class Rules:
     severity: int = 2
     canceled_is_fault: bool = False
     heal_on_succeeded: bool = True
+    judge: Judge = WHOLE_ARRAY
 
 
 class ActionTracker:
@@ -169,12 +187,16 @@ class ActionTracker:
         return state is not None and state.failed
 
     def observe(self, action: str, goals: Sequence[Goal]) -> list[Transition]:
-        """One status array of ``action``: FAILED on healthy→failed, PASSED on failed→healthy."""
+        """One status array of ``action``: FAILED on healthy→failed, PASSED on failed→healthy.
+
+        Judged on the whole array, or on the goals whose status is new (``Rules.judge``)."""
         state = self._actions.setdefault(action, _ActionState())
-        fresh = [(goal_id, status) for goal_id, status in goals
-                 if state.last.get(goal_id) != status]
+        judged = list(goals)
+        if self.rules.judge == NEW_GOALS:
+            judged = [(goal_id, status) for goal_id, status in goals
+                      if state.last.get(goal_id) != status]
         state.last = dict(goals)
-        verdict = net_state(fresh, self.rules.canceled_is_fault)
+        verdict = net_state(judged, self.rules.canceled_is_fault)
         if verdict.net is Net.FAILED:
             out = []
             for suffix, failing in verdict.failing.items():
@@ -210,9 +232,60 @@ def describe(action: str, suffix: str, goals: Sequence[Goal]) -> str:
     return f"action {action}: {noun} {shown} {suffix}"
 
 
+@dataclass(frozen=True)
+class GoalOutcome:
+    """The terminal status of one goal, to be recorded once (FaultLedger.record_goal_outcome)."""
+
+    action: str
+    goal_id: str
+    """UUID text (``goal_text``)."""
+    status: str
+    """SUCCEEDED, ABORTED or CANCELED."""
+    stamp_ns: int
+    """When the bridge first saw the terminal status (the receive time of that array): the
+    outcome belongs to the period the goal ended in. (``goal_info.stamp`` is the time the
+    server *accepted* the goal; a status array carries no end time.)"""
+
+
+class RecordedGoals:
+    """The goals whose outcome was already handed on, so each goal is recorded once although
+    servers republish finished goals in every array.
+
+    A bounded LRU of (action, goal_id): a goal forgotten (more than ``capacity`` newer ones)
+    or a restarted bridge sends an outcome again, which the fault manager answers as a
+    duplicate and does not store (it keys outcomes by action and goal id).
+    """
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = max(capacity, 1)
+        self._recorded: OrderedDict[tuple[str, bytes], None] = OrderedDict()
+
+    def new_outcomes(self, action: str, goals: Iterable[Goal], received_ns: int
+                     ) -> list[GoalOutcome]:
+        """Outcomes of the terminal goals among ``goals`` not handed on yet, at the time the
+        array showing them was received."""
+        out = []
+        for goal_id, status in goals:
+            if status not in TERMINAL:
+                continue
+            key = (action, goal_id)
+            if key in self._recorded:
+                self._recorded.move_to_end(key)
+                continue
+            self._recorded[key] = None
+            if len(self._recorded) > self.capacity:
+                self._recorded.popitem(last=False)
+            out.append(GoalOutcome(action, goal_text(goal_id), STATUS_NAMES[status],
+                                   received_ns))
+        return out
+
+    def __len__(self) -> int:
+        return len(self._recorded)
+
+
 class SeenGoals:
     """Bounded LRU of goal_id:status already logged: keeps log lines from repeating. It has no
-    say in fault decisions (ActionTracker compares with the previous array instead)."""
+    say in fault decisions (ActionTracker judges the arrays themselves)."""
 
     def __init__(self, capacity: int) -> None:
         self.capacity = max(capacity, 1)

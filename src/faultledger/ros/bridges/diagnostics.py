@@ -15,6 +15,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from faultledger.ros.bridges.diagnostics_mapping import EdgeTracker, Settings, Throttle
+from faultledger.ros.guard import guard_callback
 from faultledger.ros.reporter import FaultReporter
 
 __all__ = ["NODE_NAME", "Bridge", "Settings"]
@@ -36,7 +37,8 @@ class Bridge:
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=settings.queue_depth,
                          reliability=reliability, durability=DurabilityPolicy.VOLATILE)
         self._subscription = node.create_subscription(
-            DiagnosticArray, settings.topic, self._on_array, qos)
+            DiagnosticArray, settings.topic, guard_callback(self._on_array, log, settings.topic),
+            qos)
         log.info(f"diagnostics bridge: listening on {self._subscription.topic_name}")
 
     def _on_array(self, message: Any) -> None:

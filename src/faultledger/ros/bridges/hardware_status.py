@@ -23,6 +23,7 @@ from faultledger.ros.bridges.hardware_status_mapping import (
     Throttle,
     resolve_severities,
 )
+from faultledger.ros.guard import guard_callback
 from faultledger.ros.reporter import FaultReporter
 
 __all__ = ["NODE_NAME", "Bridge", "Settings", "import_message_type"]
@@ -60,7 +61,8 @@ class Bridge:
             self._subscribe(topic)
         if settings.discover:
             self._scan()
-            self._timer = node.create_timer(settings.rescan_period_sec, self._scan)
+            self._timer = node.create_timer(settings.rescan_period_sec,
+                                            guard_callback(self._scan, self._log, "rescan"))
 
     def _message_type(self, name: str) -> tuple[str, Any]:
         """The configured type; if it cannot be imported, ours (with an error naming it)."""
@@ -79,7 +81,8 @@ class Bridge:
             return
         try:
             self._subscriptions[topic] = self._node.create_subscription(
-                self._type, topic, self._on_message, self._qos)
+                self._type, topic, guard_callback(self._on_message, self._log, topic),
+                self._qos)
         except Exception as error:  # an invalid topic name in the config must not stop us
             self._throttle.warn(f"subscribe:{topic}", f"cannot subscribe to {topic!r}: {error}")
             return

@@ -25,6 +25,7 @@ from faultledger.ros.bridges.node_state_mapping import (
     Severities,
     Throttle,
 )
+from faultledger.ros.guard import guard_callback
 
 if TYPE_CHECKING:
     from faultledger.ros.reporter import FaultReporter
@@ -70,9 +71,11 @@ class Bridge:
                        heartbeat_lost=settings.heartbeat_lost_severity))
         self._throttle = Throttle(WARN_EVERY_SEC)
         self._subscription = node.create_subscription(
-            node_state_type(), settings.topic, self._on_state, QOS)
-        self._timer = node.create_timer(settings.check_period_sec, self._check,
-                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+            node_state_type(), settings.topic,
+            guard_callback(self._on_state, self._log, settings.topic), QOS)
+        self._timer = node.create_timer(
+            settings.check_period_sec, guard_callback(self._check, self._log, "heartbeat check"),
+            clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._log.info(f"node_state: watching {settings.topic}, heartbeat timeout "
                        f"{settings.heartbeat_timeout_sec:g} s")
 

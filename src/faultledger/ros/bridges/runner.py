@@ -20,6 +20,7 @@ from rclpy.utilities import ok, try_shutdown
 from faultledger.errors import ConfigError
 from faultledger.ros.bridges import BRIDGES
 from faultledger.ros.bridges.settings import normalise, read_yaml
+from faultledger.ros.guard import guard_callback
 from faultledger.ros.reporter import FaultReporter
 
 
@@ -95,8 +96,10 @@ def run_bridge(name: str, config: Path | None, ros_args: list[str]) -> int:
         running = start_bridge(name, raw, executor)
         print(f"bridge ready: {running.name} as {running.node.get_fully_qualified_name()}",
               flush=True)
+        # Callbacks never raise (guard.py); this keeps rclpy's own steps from ending us.
+        spin_once = guard_callback(executor.spin_once, running.node.get_logger(), "executor")
         while not stop.is_set() and ok():
-            executor.spin_once(timeout_sec=0.1)
+            spin_once(0.1)
     finally:
         if running is not None:
             running.close()

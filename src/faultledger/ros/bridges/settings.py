@@ -4,6 +4,10 @@ A bridge runs on a robot next to everything else; a typo in its YAML must not st
 value that fails validation is replaced by the field's default and named in a warning
 (``rescan_period_sec=-1.0 is invalid (Input should be greater than 0); using 2.0``). Unknown
 keys are warned about and ignored. Only a file that cannot be read or parsed is an error.
+
+A model may define ``prepare_settings(values, warn)`` (a classmethod): it is given the raw
+values first and may rewrite them with a warning (the action-status bridge upper-snake-cases
+its ``code_prefix``) before they are validated.
 """
 
 from __future__ import annotations
@@ -29,6 +33,9 @@ def normalise(model: type[M], raw: Mapping[str, Any], warn: Callable[[str], None
     for key in [k for k in values if k not in model.model_fields]:
         warn(f"{prefix}{key} is not a setting of this bridge; ignored")
         del values[key]
+    prepare = getattr(model, "prepare_settings", None)
+    if callable(prepare):
+        prepare(values, lambda message: warn(f"{prefix}{message}"))
     while True:
         try:
             return model.model_validate(values)
