@@ -1,19 +1,55 @@
-"""faultledger: an event-sourced fault manager for ROS 2 robots with a verifiable fault log."""
+"""faultledger: an event-sourced fault manager for ROS 2 robots with a verifiable fault log.
+
+Everything a caller of ``FaultLedger`` needs is importable from here: the ledger, the values
+its methods take and return, and every exception it may raise (all are ``FaultLedgerError``;
+``reason`` tells them apart by kind, as the results' ``reason`` does).
+"""
 
 from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.notifications import Notification
-from faultledger.domain.policy import Policy
-from faultledger.domain.shifts import ShiftCalendar
+from faultledger.domain.policy import Policy, SourceOverride
+from faultledger.domain.projector import Transition
+from faultledger.domain.shifts import Period, ShiftCalendar, ShiftInstance
 from faultledger.domain.stat_rows import StatsRow
 from faultledger.domain.types import EventType, FaultStatus, NotificationType, Severity
-from faultledger.errors import FaultLedgerError
-from faultledger.service.ledger import FaultLedger, Subscription
+from faultledger.errors import (
+    ConfigError,
+    DamagedDatabaseError,
+    DatabaseFullError,
+    DatabaseLockedError,
+    DatabaseReadOnlyError,
+    FaultLedgerError,
+    InternalError,
+    InvalidInputError,
+    LedgerClosedError,
+    NotADatabaseError,
+    Reason,
+    SchemaOutdatedError,
+    SchemaTooNewError,
+    StoreError,
+    WriteConflictError,
+)
+from faultledger.service.ledger import FaultLedger, Restored, Subscription
 from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
-from faultledger.service.results import ClearResult, FaultLookup, ReportResult, VerifyReport
+from faultledger.service.results import (
+    ClearResult,
+    Downtime,
+    EntityLookup,
+    FaultLookup,
+    ReportResult,
+    VerifyReport,
+)
 
 __all__ = [
     "ClearResult",
+    "ConfigError",
+    "DamagedDatabaseError",
+    "DatabaseFullError",
+    "DatabaseLockedError",
+    "DatabaseReadOnlyError",
+    "Downtime",
+    "EntityLookup",
     "EventType",
     "Fault",
     "FaultLedger",
@@ -21,15 +57,29 @@ __all__ = [
     "FaultLookup",
     "FaultStatus",
     "GoalOutcomeRequest",
+    "InternalError",
+    "InvalidInputError",
+    "LedgerClosedError",
     "LogRecord",
+    "NotADatabaseError",
     "Notification",
     "NotificationType",
+    "Period",
     "Policy",
+    "Reason",
     "ReportRequest",
     "ReportResult",
+    "Restored",
+    "SchemaOutdatedError",
+    "SchemaTooNewError",
     "Severity",
     "ShiftCalendar",
+    "ShiftInstance",
+    "SourceOverride",
     "StatsRow",
+    "StoreError",
     "Subscription",
+    "Transition",
     "VerifyReport",
+    "WriteConflictError",
 ]

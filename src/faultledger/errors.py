@@ -2,9 +2,29 @@
 
 from __future__ import annotations
 
+from enum import StrEnum
+
+
+class Reason(StrEnum):
+    """Machine-readable kind of an answer, beside its message: adapters map it (HTTP status
+    codes, exit codes) without parsing text."""
+
+    OK = "ok"
+    INVALID = "invalid"
+    """The input was refused; nothing was stored."""
+    NOT_FOUND = "not_found"
+    DUPLICATE = "duplicate"
+    """Already recorded (an event_id, a goal outcome): accepted, nothing stored again."""
+    UNAVAILABLE = "unavailable"
+    """The database cannot serve now (locked, full, read-only, damaged, closed)."""
+    INTERNAL = "internal"
+    """Something this code did not foresee; the message says what."""
+
 
 class FaultLedgerError(Exception):
     """Base class: the message is meant for the operator, complete and without a traceback."""
+
+    reason: Reason = Reason.INVALID
 
 
 class InvalidInputError(FaultLedgerError, ValueError):
@@ -17,6 +37,8 @@ class ConfigError(FaultLedgerError):
 
 class StoreError(FaultLedgerError):
     """The database cannot do what was asked; the message says why."""
+
+    reason = Reason.UNAVAILABLE
 
 
 class NotADatabaseError(StoreError):
@@ -52,4 +74,10 @@ class SchemaOutdatedError(StoreError):
 
 
 class LedgerClosedError(FaultLedgerError):
-    pass
+    reason = Reason.UNAVAILABLE
+
+
+class InternalError(StoreError):
+    """An unexpected failure while writing, turned into an answer (the writer's last resort)."""
+
+    reason = Reason.INTERNAL

@@ -17,7 +17,7 @@ from enum import StrEnum
 from pathlib import Path
 
 from sqlalchemy.engine import make_url
-from sqlalchemy.exc import ArgumentError
+from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 
 from faultledger.domain.periods import default_calendar
 from faultledger.domain.policy import Policy
@@ -68,10 +68,16 @@ def database_url(text: str) -> str:
         url = make_url(value)
     except ArgumentError as error:
         raise ConfigError(f"invalid database URL {value!r}: {error}") from None
+    shown = url.render_as_string(hide_password=True)
+    try:
+        url.get_dialect()
+    except NoSuchModuleError:
+        raise ConfigError(f"unknown database kind {url.drivername!r} in {shown!r}: use "
+                          "sqlite:///FILE (or a plain path) or postgresql+psycopg://…") from None
     needed = DRIVERS.get(url.drivername)
     if needed is not None and importlib.util.find_spec(needed[0]) is None:
         module, extra = needed
-        raise ConfigError(f"database URL {url.render_as_string(hide_password=True)!r} needs "
+        raise ConfigError(f"database URL {shown!r} needs "
                           f"the {module} driver: pip install 'faultledger[{extra}]'")
     return value
 

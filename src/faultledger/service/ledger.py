@@ -31,7 +31,12 @@ from faultledger.domain.projector import Projector, Transition
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import StatsRow
 from faultledger.domain.statistics import StatsFold
-from faultledger.errors import DamagedDatabaseError, FaultLedgerError, InvalidInputError
+from faultledger.errors import (
+    DamagedDatabaseError,
+    FaultLedgerError,
+    InvalidInputError,
+    Reason,
+)
 from faultledger.service import statistics
 from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
 from faultledger.service.results import (
@@ -202,7 +207,8 @@ class FaultLedger:
         try:
             answers = iter(self._writer.submit_all(commands))
         except FaultLedgerError as error:
-            answers = iter([ReportResult(False, str(error))] * len(commands))
+            answers = iter([ReportResult(False, str(error), reason=error.reason)]
+                           * len(commands))
         return [c if isinstance(c, ReportResult) else next(answers) for c in checked]
 
     def clear(self, fault_code: str, actor: str = "api", reason: str = "",
@@ -217,7 +223,7 @@ class FaultLedger:
             result: ClearResult = self._writer.submit(
                 Clear(FaultCleared(fault_code, actor, reason), occurred_ns))
         except FaultLedgerError as error:
-            return ClearResult(False, str(error))
+            return ClearResult(False, str(error), reason=error.reason)
         return result
 
     def run_timers(self, now: datetime | None = None) -> int:
@@ -258,7 +264,7 @@ class FaultLedger:
             return FaultLookup(False, problem)
         fault = self._writer.projector.get_committed(fault_code)
         if fault is None:
-            return FaultLookup(False, f"Fault not found: {fault_code}")
+            return FaultLookup(False, f"Fault not found: {fault_code}", reason=Reason.NOT_FOUND)
         return FaultLookup(True, "", fault)
 
     def get_fault(self, fault_code: str) -> Fault | None:

@@ -4,8 +4,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import datetime
+from typing import Any
 
 from faultledger.domain.fault import Fault
+from faultledger.errors import Reason
+
+
+def _default_reason(result: Any, ok: bool, duplicate: bool = False) -> None:
+    """Fill in the usual reason when none was given: ok, duplicate, else invalid input."""
+    if not result.reason:
+        reason = Reason.DUPLICATE if duplicate else Reason.OK if ok else Reason.INVALID
+        object.__setattr__(result, "reason", reason)
 
 
 @dataclass(frozen=True, slots=True)
@@ -15,6 +24,11 @@ class ReportResult:
     seq: int | None = None
     event_id: str | None = None
     duplicate: bool = False
+    reason: str = ""
+    """A ``Reason``: ok, duplicate, invalid, unavailable or internal."""
+
+    def __post_init__(self) -> None:
+        _default_reason(self, self.accepted, self.duplicate)
 
 
 @dataclass(frozen=True, slots=True)
@@ -22,6 +36,11 @@ class ClearResult:
     success: bool
     message: str
     seq: int | None = None
+    reason: str = ""
+    """A ``Reason``: ok, invalid, not_found, unavailable or internal."""
+
+    def __post_init__(self) -> None:
+        _default_reason(self, self.success)
 
 
 @dataclass(frozen=True, slots=True)
@@ -29,6 +48,11 @@ class FaultLookup:
     success: bool
     message: str
     fault: Fault | None = None
+    reason: str = ""
+    """A ``Reason``: ok, invalid or not_found."""
+
+    def __post_init__(self) -> None:
+        _default_reason(self, self.success)
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,6 +60,11 @@ class EntityLookup:
     success: bool
     message: str
     faults: list[Fault] = field(default_factory=list)
+    reason: str = ""
+    """A ``Reason``: ok or invalid."""
+
+    def __post_init__(self) -> None:
+        _default_reason(self, self.success)
 
 
 @dataclass(frozen=True, slots=True)

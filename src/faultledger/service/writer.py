@@ -37,7 +37,9 @@ from faultledger.domain.projector import Effect, Projector, Transition
 from faultledger.errors import (
     DatabaseFullError,
     FaultLedgerError,
+    InternalError,
     LedgerClosedError,
+    Reason,
     StoreError,
     WriteConflictError,
 )
@@ -329,7 +331,7 @@ class Writer:
             log.error("command %s failed: %s", type(group[0].command).__name__,
                       clipped(error))
             log.debug("command failed", exc_info=True)
-            self._fail(group, StoreError(f"internal error while writing: {clipped(error)}"))
+            self._fail(group, InternalError(f"internal error while writing: {clipped(error)}"))
             return
         self.commits += 1
         if batch.notifications:
@@ -381,9 +383,9 @@ class Writer:
     def _fail(group: list[_Pending], error: FaultLedgerError) -> None:
         for pending in group:
             if isinstance(pending.command, Report | RecordGoal):
-                pending.result = ReportResult(False, str(error))
+                pending.result = ReportResult(False, str(error), reason=error.reason)
             elif isinstance(pending.command, Clear):
-                pending.result = ClearResult(False, str(error))
+                pending.result = ClearResult(False, str(error), reason=error.reason)
             else:
                 pending.error = error
             pending.done = True
@@ -421,7 +423,7 @@ class Writer:
         if isinstance(command, Clear):
             code = command.event.fault_code
             if projector.get(code) is None:
-                return ClearResult(False, f"Fault not found: {code}")
+                return ClearResult(False, f"Fault not found: {code}", reason=Reason.NOT_FOUND)
             self._ensure_policy(batch)
             seq = batch.add(command.event, command.occurred_ns)
             return ClearResult(True, f"Fault cleared: {code}", seq)
