@@ -163,18 +163,10 @@ class FaultReporter:
         receive time). No local filter; retried like reports, and stored once per (action,
         goal_id) however often it is sent.
         """
-        fields = (("action", action), ("goal_id", goal_id), ("status", status),
-                  ("server_node", server_node))
-        for name, value in fields:
-            if not isinstance(value, str):
-                self._log.warning(f"FaultReporter: goal outcome {name} {clip(value)} is not a "
-                                  f"string ({type(value).__name__}); ignored")
-                return False
-            if "\x00" in value:
-                self._log.warning(f"FaultReporter: goal outcome {name} '{clip(value)}' "
-                                  f"contains a NUL character (\\x00), which a ROS string "
-                                  f"cannot carry; ignored")
-                return False
+        if not self._sendable_strings((("action", action), ("goal_id", goal_id),
+                                       ("status", status), ("server_node", server_node)),
+                                      "goal outcome"):
+            return False
         if not action or not goal_id or status not in GOAL_STATUSES:
             self._log.warning(f"FaultReporter: goal outcome needs an action, a goal id and a "
                               f"status of {', '.join(GOAL_STATUSES)}, got action "
@@ -223,17 +215,23 @@ class FaultReporter:
             self._log.warning(f"FaultReporter: empty or non-string fault_code "
                               f"{clip(fault_code)}; ignored")
             return False
-        fields = (("fault_code", fault_code), ("description", description),
-                  ("source_id", self._source_id if source_id is None else source_id))
+        return self._sendable_strings(
+            (("fault_code", fault_code), ("description", description),
+             ("source_id", self._source_id if source_id is None else source_id)),
+            f"report of '{clip(fault_code)}'")
+
+    def _sendable_strings(self, fields: tuple[tuple[str, object], ...], what: str) -> bool:
+        """Strings a ROS message carries faithfully: of type str and without NUL (a ROS
+        string ends at the first NUL); else one warning naming the field, and False."""
         for name, value in fields:
             if not isinstance(value, str):
-                self._log.warning(f"FaultReporter: {name} of '{clip(fault_code)}' is not a "
+                self._log.warning(f"FaultReporter: {what}: {name} {clip(value)} is not a "
                                   f"string ({type(value).__name__}); ignored")
                 return False
             if "\x00" in value:
-                self._log.warning(f"FaultReporter: {name} '{clip(value)}' contains a NUL "
-                                  f"character (\\x00), which a ROS string cannot carry; "
-                                  f"report of '{clip(fault_code)}' ignored")
+                self._log.warning(f"FaultReporter: {what}: {name} '{clip(value)}' contains a "
+                                  f"NUL character (\\x00), which a ROS string cannot carry; "
+                                  f"ignored")
                 return False
         return True
 
