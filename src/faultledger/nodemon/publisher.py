@@ -23,6 +23,7 @@ from faultledger.ros.bridges.node_state_mapping import (
     STOPPING,
     WARNING,
 )
+from faultledger.ros.guard import guard_callback
 
 
 class NodeStatePublisher:
@@ -45,7 +46,10 @@ class NodeStatePublisher:
         self._machine = ""
         self._human = ""
         self._publisher = node.create_publisher(self._type, topic, QOS)
-        self._timer = node.create_timer(period_sec, self._heartbeat)
+        # A failing heartbeat (a destroyed publisher, a shut-down context) must never take the
+        # user's node down with it: one log line, and the next beat tries again.
+        self._timer = node.create_timer(
+            period_sec, guard_callback(self._heartbeat, node.get_logger(), "nodemon heartbeat"))
         self._publish(STARTING, "", "")
 
     @property

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
-from faultledger.cli.safe_text import printable
+from faultledger.domain.text import printable
 from faultledger.errors import FaultLedgerError
 
 FIELD_LIMIT = 200
