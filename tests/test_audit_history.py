@@ -340,13 +340,39 @@ def test_a_date_alone_is_midnight(ledger: FaultLedger, log_url: str) -> None:
     assert [row["seq"] for row in parse_jsonl(done.stdout)] == [r.seq for r in expected]
 
 
-def test_a_time_without_offset_is_local_time(ledger: FaultLedger, log_url: str) -> None:
-    """Documented: like every faultledger command, a naive time is the machine's local time."""
-    done = run_cli("history", "--db", log_url, "--json", "--since", "2026-11-22T07:00:04",
-                   env={"TZ": "Asia/Tokyo"})  # UTC+9, no DST
+def test_a_time_without_offset_is_in_the_calendars_zone(ledger: FaultLedger, log_url: str,
+                                                        tmp_path: Path) -> None:
+    """docs/cli.md, Times: a naive time is in the shift calendar's zone (UTC by default),
+    whatever the machine's zone, as in `stats`."""
+    done = run_cli("history", "--db", log_url, "--json", "--since", "2026-11-21T22:00:04",
+                   env={"TZ": "Asia/Tokyo"})  # the machine's zone does not matter
     assert done.returncode == 0, done.stderr
     expected = ledger.history(since=T0 + timedelta(seconds=4))
     assert [row["seq"] for row in parse_jsonl(done.stdout)] == [r.seq for r in expected]
+    shifts = tmp_path / "shifts.yaml"
+    shifts.write_text("timezone: Asia/Tokyo\nshifts:\n  - {name: day, start: '08:00', "
+                      "end: '20:00'}\n  - {name: night, start: '20:00', end: '08:00'}\n")
+    done = run_cli("history", "--db", log_url, "--json", "--shifts", str(shifts),
+                   "--since", "2026-11-22T07:00:04", env={"TZ": "UTC"})  # UTC+9, no DST
+    assert done.returncode == 0, done.stderr
+    assert [row["seq"] for row in parse_jsonl(done.stdout)] == [r.seq for r in expected]
+
+
+def test_shift_ids_bound_history(ledger: FaultLedger, log_url: str) -> None:
+    """A shift id is its start as --since and its end as --until (the default calendar:
+    night 22:00-06:00 UTC)."""
+    done = run_cli("history", "--db", log_url, "--json", "--since", "2026-11-21/night",
+                   "--until", "2026-11-21/night")
+    assert done.returncode == 0, done.stderr
+    expected = ledger.history(since=T0, until=T0 + timedelta(hours=8))
+    assert [row["seq"] for row in parse_jsonl(done.stdout)] == [r.seq for r in expected]
+    assert expected
+    done = run_cli("history", "--db", log_url, "--json", "--until", "2026-11-21/night")
+    assert done.returncode == 0, done.stderr
+    assert len(parse_jsonl(done.stdout)) == len(ledger.history(until=T0 + timedelta(hours=8)))
+    done = run_cli("history", "--db", log_url, "--since", "2026-11-21/lunch")
+    assert done.returncode == 2
+    assert done.stderr.startswith("error: --since: no shift 'lunch'"), done.stderr
 
 
 def test_table_is_the_default(log_url: str) -> None:

@@ -182,12 +182,12 @@ def test_without_a_calendar_the_default_utc_shifts_apply(scenario: Scenario) -> 
 
 @pytest.mark.parametrize(("args", "words"), [
     (["--by", "week"], ["by must be one of shift, day, hour, 10min", "'week'"]),
-    (["--since", "yesterday"], ["since:", "'yesterday'"]),
+    (["--since", "yesterday"], ["--since must be", "'yesterday'"]),
     (["--until", "2026-11-21/lunch"], ["until:", "no shift 'lunch'"]),
     (["--since", "2026-11-22", "--until", "2026-11-21"], ["must be before until"]),
     (["--group-by", "robot"], ["group_by", "robot"]),
     (["--group-by", "code", "--group-by", "code"], ["distinct"]),
-    (["--as-of", "soon"], ["--as-of:", "'soon'"]),
+    (["--as-of", "soon"], ["--as-of must be", "'soon'"]),
     (["--json", "--csv"], ["choose one of --json and --csv"]),
 ])
 def test_bad_input_is_one_clear_line_and_exit_2(

@@ -1,6 +1,7 @@
 """SPEC §3: the schema is created and changed by Alembic migrations only.
 
-The migrations in ``migrations/`` must produce exactly ``faultledger.store.schema.metadata``;
+The migrations in ``src/faultledger/migrations/`` must produce exactly
+``faultledger.store.schema.metadata``;
 ``FaultLedger.open`` and ``faultledger db upgrade`` bring a file to the head revision; read
 commands never create or migrate anything.
 """
@@ -24,7 +25,7 @@ from sqlalchemy import create_engine
 from faultledger import FaultLedger
 from faultledger.store.schema import metadata
 
-MIGRATIONS = Path(__file__).resolve().parents[1] / "migrations"
+MIGRATIONS = Path(__file__).resolve().parents[1] / "src" / "faultledger" / "migrations"
 CLI = [sys.executable, "-m", "faultledger.cli.main"]
 
 
@@ -67,7 +68,7 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def alembic_on(path: Path, action: str, target: str) -> None:
-    """Run an Alembic command on the file through the project's migrations/env.py."""
+    """Run an Alembic command on the file through the package's migrations/env.py."""
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS))
     engine = create_engine(url(path))

@@ -23,7 +23,7 @@ from faultledger import FaultLedger, Policy, ShiftCalendar, StatsRow
 from faultledger.domain.periods import default_calendar, parse_bound, periods
 from faultledger.errors import InvalidInputError
 
-MIGRATIONS = Path(__file__).resolve().parents[1] / "migrations"
+MIGRATIONS = Path(__file__).resolve().parents[1] / "src" / "faultledger" / "migrations"
 T0 = datetime(2026, 11, 20, 6, 0, tzinfo=UTC)
 HEALING = Policy(confirmation_threshold=-1, healing_enabled=True, healing_threshold=0)
 BERLIN = ShiftCalendar.model_validate({"timezone": "Europe/Berlin", "shifts": [

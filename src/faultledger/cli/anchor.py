@@ -14,7 +14,8 @@ from typing import Annotated
 import typer
 
 from faultledger.cli import render
-from faultledger.cli.audit import ConfigOption, DbOption, _fail, _ledger
+from faultledger.cli.options import ConfigOption, DbOption, opened, prepare
+from faultledger.cli.options import fail as _fail
 from faultledger.errors import FaultLedgerError
 from faultledger.service import anchors
 from faultledger.service.config import load_settings
@@ -80,7 +81,7 @@ def export(
             check_target(output, force)  # before reading the log; checked again when written
         except OutputFileError as error:
             _fail(str(error))
-    with _ledger(db, config) as ledger:
+    with opened(prepare(db, config)) as ledger:
         try:
             anchor = anchors.make_anchor(ledger, private_key)
         except anchors.AnchorRefused as refused:

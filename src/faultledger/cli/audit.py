@@ -10,24 +10,34 @@ from __future__ import annotations
 import csv
 import json
 import os
-import re
 import sys
 from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
 from datetime import UTC, datetime
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any, NoReturn, TextIO
+from typing import Annotated, Any, TextIO
 
 import typer
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
 from faultledger.cli import render
-from faultledger.cli.safe_text import cell, printable
-from faultledger.domain import validation
+from faultledger.cli.options import (
+    TIME_HELP,
+    ConfigOption,
+    DbOption,
+    JsonOption,
+    ShiftsOption,
+    WideOption,
+    opened,
+    parse_moment,
+    parse_time,
+    prepare,
+)
+from faultledger.cli.options import fail as _fail
+from faultledger.cli.safe_text import cell
 from faultledger.domain.events import KINDS
 from faultledger.domain.integrity import GENESIS_HASH
-from faultledger.errors import DamagedDatabaseError, FaultLedgerError
+from faultledger.errors import FaultLedgerError
 from faultledger.service.anchors import (
     AnchorCheck,
     load_public_key,
@@ -44,22 +54,6 @@ from faultledger.service.ledger import (
 )
 from faultledger.service.output_files import OutputFileError, check_target, open_text_output
 from faultledger.store.event_log import StoredRecord
-
-# The same options as cli/main.py's (kept here: main imports this module, not the reverse).
-DbOption = Annotated[
-    str | None,
-    typer.Option("--db", envvar="FAULTLEDGER_DB", show_envvar=True,
-                 help="Database URL (default: the config's, else sqlite:///var/faultledger.db)."),
-]
-ConfigOption = Annotated[
-    Path | None,
-    typer.Option("--config", envvar="FAULTLEDGER_CONFIG", show_envvar=True,
-                 help="YAML configuration file (see config/faultledger.yaml)."),
-]
-JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of text.")]
-
-TIME_HELP = ("ISO 8601 date or date-time; without an offset it is this machine's local time "
-             "(add Z or +00:00 for UTC)")
 
 
 class Format(StrEnum):
@@ -89,9 +83,10 @@ def history(
         "(repeatable: any of them).")] = None,
     source: Annotated[str | None, typer.Option("--source", help="Exact source id.")] = None,
     since: Annotated[str | None, typer.Option(
-        "--since", help=f"occurred_at from (inclusive); {TIME_HELP}.")] = None,
+        "--since", help=f"occurred_at from (inclusive): {TIME_HELP}.")] = None,
     until: Annotated[str | None, typer.Option(
-        "--until", help="occurred_at before (exclusive); same format as --since.")] = None,
+        "--until", help="occurred_at before (exclusive); like --since, a shift id means its "
+        "end.")] = None,
     from_seq: Annotated[int | None, typer.Option(
         "--from-seq", min=1, help="First seq (inclusive).")] = None,
     to_seq: Annotated[int | None, typer.Option(
@@ -109,6 +104,8 @@ def history(
         "file is kept unless --force.")] = None,
     force: Annotated[bool, typer.Option(
         "--force", help="Replace an existing --output file.")] = False,
+    wide: WideOption = False,
+    shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
@@ -123,15 +120,18 @@ def history(
             check_target(output, force)  # before the query: refuse early, write nothing
         except OutputFileError as error:
             _fail(str(error))
+    setup = prepare(db, config, shifts=shifts)
     filters: dict[str, Any] = {
-        "codes": code or None, "source": source, "since": parse_time(since, "--since"),
-        "until": parse_time(until, "--until"), "kinds": kind or (), "limit": limit,
-        "from_seq": from_seq, "to_seq": to_seq,
+        "codes": code or None, "source": source,
+        "since": parse_time(since, "--since", setup.calendar),
+        "until": parse_time(until, "--until", setup.calendar, upper=True),
+        "kinds": kind or (), "limit": limit, "from_seq": from_seq, "to_seq": to_seq,
     }
-    with _ledger(db, config) as ledger:
+    with opened(setup) as ledger:
         if chosen is Format.table:
             records = ledger.history(**filters)
-            render.console().print(render.history_table(records))
+            out = render.console(wide=wide)
+            out.print(render.history_table(records, render.fit_width(out, wide)))
             return
         rows = export_history(ledger, **filters)
         writer = _write_csv if chosen is Format.csv else _write_jsonl
@@ -147,11 +147,11 @@ def verify(
     to_seq: Annotated[int | None, typer.Option(
         "--to-seq", min=1, help="Last seq of the segment (inclusive).")] = None,
     since: Annotated[str | None, typer.Option(
-        "--since", help=f"Segment from the first record recorded at or after this; "
+        "--since", help=f"Segment from the first record recorded at or after this: "
         f"{TIME_HELP}.")] = None,
     until: Annotated[str | None, typer.Option(
         "--until", help="Segment up to the last record recorded at or before this (the "
-        "prefix `state-at` uses).")] = None,
+        "prefix `state-at` uses); a shift id means its end.")] = None,
     anchor_file: Annotated[list[Path] | None, typer.Option(
         "--anchor", help="Signed anchor file (repeatable; `faultledger anchor`): its record "
         "must be stored with the anchored hash, the chain intact up to it. Default: the newest "
@@ -160,6 +160,7 @@ def verify(
         "--public-key", help="The trusted Ed25519 public key (PEM) anchors must be signed "
         "with (default: the config's anchors.public_key).")] = None,
     as_json: JsonOption = False,
+    shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
@@ -173,11 +174,13 @@ def verify(
     _check_seq_range(from_seq, to_seq)
     anchor_paths, trusted = _anchor_inputs(anchor_file, public_key, config)
     matched: list[AnchorCheck] = []
-    with _ledger(db, config, verifying=True) as ledger:
+    setup = prepare(db, config, shifts=shifts)
+    first_time = parse_time(since, "--since", setup.calendar)
+    last_time = parse_time(until, "--until", setup.calendar, upper=True)
+    with opened(setup, verifying=True) as ledger:
         start, end = from_seq, to_seq
         if since is not None or until is not None:
-            start, end = seqs_recorded_between(ledger, parse_time(since, "--since"),
-                                               parse_time(until, "--until"))
+            start, end = seqs_recorded_between(ledger, first_time, last_time)
         ranged = start is not None or end is not None
         report_ = ledger.verify(start, end) if ranged else ledger.verify()
         first = 1 if start is None else start
@@ -200,15 +203,15 @@ def verify(
                                for m in matched]
         typer.echo(json.dumps(data, indent=2))
     elif report_.ok and not ranged:
-        typer.echo(printable(f"OK: {report_.records} records, chain intact, projections "
-                             f"equal a full replay; head seq {report_.head_seq} hash "
-                             f"{report_.head_hash}"))
+        render.say(f"OK: {report_.records} records, chain intact, projections "
+                   f"equal a full replay; head seq {report_.head_seq} hash "
+                   f"{report_.head_hash}")
     elif report_.ok:
         origin = ("the genesis hash" if first == 1
                   else f"the stored hash of record {first - 1} ({anchor})")
-        typer.echo(printable(f"OK: records {first}..{report_.head_seq} ({report_.records} "
-                             f"records), chain intact from {origin}; seq {report_.head_seq} "
-                             f"hash {report_.head_hash}"))
+        render.say(f"OK: records {first}..{report_.head_seq} ({report_.records} "
+                   f"records), chain intact from {origin}; seq {report_.head_seq} "
+                   f"hash {report_.head_hash}")
     else:
         for problem in report_.problems:
             render.complain("FAILED:", problem)
@@ -216,9 +219,9 @@ def verify(
             typer.echo(f"first bad seq: {report_.first_bad_seq}")
     if report_.ok and not as_json:
         for m in matched:
-            typer.echo(printable(f"anchor {m.path}: seq {m.anchor.seq} hash {m.anchor.hash} "
-                                 f"(made {iso_ns(m.anchor.anchored_at_ns)}, key "
-                                 f"{m.anchor.key_id}) matches"))
+            render.say(f"anchor {m.path}: seq {m.anchor.seq} hash {m.anchor.hash} "
+                       f"(made {iso_ns(m.anchor.anchored_at_ns)}, key "
+                       f"{m.anchor.key_id}) matches")
     if not report_.ok:
         raise typer.Exit(1)
 
@@ -228,17 +231,16 @@ def state_at(
         metavar="WHEN|SEQ", help=f"A seq number, or a time: {TIME_HELP}. A time means the "
         "records recorded at or before it (what the ledger knew then).")],
     as_json: JsonOption = False,
+    wide: WideOption = False,
+    shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
     """The fault table (every status) as of a seq or a time: a replay of that log prefix, with
     the hash of its last record, which anchors it."""
-    moment: datetime | int
-    if re.fullmatch(r"[0-9]{1,19}", when.strip()):
-        moment = int(when)
-    else:
-        moment = parse_time(when, "WHEN|SEQ", "a seq number or an ISO 8601 date or time") or 0
-    with _ledger(db, config) as ledger:
+    setup = prepare(db, config, shifts=shifts)
+    moment = parse_moment(when, "WHEN|SEQ", setup.calendar)
+    with opened(setup) as ledger:
         seq = seq_recorded_by(ledger, moment)
         faults = ledger.state_at(seq)
         digest = _stored_hash(ledger, seq)
@@ -248,8 +250,8 @@ def state_at(
                                "faults": [render.fault_dict(f) for f in faults]}, indent=2))
         return
     title = f"faults as of seq {seq}" + (f" (recorded at or before {at})" if at else "")
-    out = render.console()
-    out.print(render.faults_table(faults, title))
+    out = render.console(wide=wide)
+    out.print(render.faults_table(faults, title, render.fit_width(out, wide)))
     out.print(cell(f"seq {seq} hash {digest}"))
 
 
@@ -327,57 +329,6 @@ def _export(rows: Iterator[StoredRecord], write: Writer, output: Path | None,
 
 
 # -- helpers ---------------------------------------------------------------------------------
-def _fail(message: str, code: int = 2) -> NoReturn:
-    render.complain("error:", message)
-    raise typer.Exit(code)
-
-
-@contextmanager
-def _ledger(db: str | None, config: Path | None, *, verifying: bool = False
-            ) -> Iterator[FaultLedger]:
-    """A read-only ledger (nothing created, migrated or recorded); its errors become one line
-    and exit 2 also when the app runs without cli.main's wrapper (tests, embedding). For
-    `verify`, a database whose content cannot be read back is a failed check (exit 1)."""
-    try:
-        settings = load_settings(config)
-        ledger = FaultLedger.open(db or settings.database.url, create=False, upgrade=False,
-                                  max_batch=settings.database.max_batch, background=False)
-    except DamagedDatabaseError as error:
-        if verifying:
-            render.complain("verify FAILED:", str(error))
-            raise typer.Exit(1) from None
-        _fail(str(error))
-    except FaultLedgerError as error:
-        _fail(str(error))
-    try:
-        yield ledger
-    except FaultLedgerError as error:
-        _fail(str(error))
-    finally:
-        ledger.close()
-
-
-def parse_time(text: str | None, name: str, expected: str = "an ISO 8601 date or time"
-                ) -> datetime | None:
-    """ISO 8601 date or date-time; one without an offset is this machine's local time (as in
-    the other commands)."""
-    if text is None:
-        return None
-    try:
-        moment = datetime.fromisoformat(text.strip())
-    except ValueError:
-        _fail(f"{name} must be {expected} (e.g. 2026-11-21, 2026-11-21T22:00 or "
-              f"2026-11-21T22:00Z), got {validation.shown(text)}")
-    try:
-        moment = moment if moment.tzinfo is not None else moment.astimezone()
-    except (ValueError, OverflowError):  # year 1 or 9999 moved by the local offset
-        _fail(validation.range_message(name, validation.shown(text)))
-    problem = validation.time_error(name, moment)
-    if problem:
-        _fail(problem)
-    return moment
-
-
 def _check_seq_range(from_seq: int | None, to_seq: int | None) -> None:
     if from_seq is not None and to_seq is not None and from_seq > to_seq:
         _fail(f"--from-seq {from_seq} is after --to-seq {to_seq}: the range is empty")

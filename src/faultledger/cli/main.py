@@ -5,25 +5,36 @@ from __future__ import annotations
 import getpass
 import json
 import os
-import re
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
-from datetime import datetime
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as package_version
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import Annotated
 
 import typer
 
 from faultledger.cli import anchor as anchor_commands
 from faultledger.cli import audit, render
 from faultledger.cli import stats as stats_commands
-from faultledger.cli.safe_text import printable
+from faultledger.cli.options import (
+    TIME_HELP,
+    ConfigOption,
+    DbOption,
+    JsonOption,
+    Role,
+    ShiftsOption,
+    WideOption,
+    fail,
+    opened,
+    parse_moment,
+    parse_time,
+    prepare,
+    settings_for,
+)
+from faultledger.cli.safe_text import cell, printable
 from faultledger.domain.clock import from_ns
 from faultledger.domain.types import FaultStatus, Severity
 from faultledger.errors import FaultLedgerError
-from faultledger.service.config import Settings, load_settings
-from faultledger.service.ledger import FaultLedger
 from faultledger.store import migrate
 from faultledger.store.database import Database, describe
 
@@ -36,50 +47,34 @@ app = typer.Typer(
 db_app = typer.Typer(help="Schema migrations (Alembic).", no_args_is_help=True)
 app.add_typer(db_app, name="db")
 
-DbOption = Annotated[
-    str | None,
-    typer.Option("--db", envvar="FAULTLEDGER_DB", show_envvar=True,
-                 help="Database URL (default: the config's, else sqlite:///var/faultledger.db)."),
-]
-ConfigOption = Annotated[
-    Path | None,
-    typer.Option("--config", envvar="FAULTLEDGER_CONFIG", show_envvar=True,
-                 help="YAML configuration file (see config/faultledger.yaml)."),
-]
-JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
-SEQ_NUMBER = re.compile(r"[0-9]{1,19}")
-"""A seq number where a time or a seq may be given (ASCII digits that fit 64 bits)."""
-
-def fail(message: str, code: int = 2) -> NoReturn:
-    render.complain("error:", message)
-    raise typer.Exit(code)
+STATUSES = ", ".join(s.value for s in FaultStatus)
 
 
-def settings_for(config: Path | None) -> Settings:
-    return load_settings(config)
-
-
-def url_for(db: str | None, settings: Settings) -> str:
-    return db or settings.database.url
-
-
-@contextmanager
-def opened(db: str | None, config: Path | None, *, writer: bool = False) -> Iterator[FaultLedger]:
-    """A ledger for one command: read commands never create, migrate or record anything."""
-    settings = settings_for(config)
-    policy = settings.policy if writer and config is not None else None
-    ledger = FaultLedger.open(url_for(db, settings), policy=policy, create=writer,
-                              upgrade=writer, max_batch=settings.database.max_batch,
-                              background=False)
+def _version() -> str:
     try:
-        yield ledger
-    finally:
-        ledger.close()
+        return package_version("faultledger")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "unknown"
 
 
-def parse_time(text: str | None, name: str) -> datetime | None:
-    """ISO 8601; a time without an offset is local time of this machine (cli/audit.py)."""
-    return audit.parse_time(text, name)
+def _print_version(value: bool) -> None:
+    if value:
+        typer.echo(f"faultledger {_version()}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option(
+        "--version", callback=_print_version, is_eager=True,
+        help="Print the faultledger version and exit.")] = False,
+) -> None:
+    """Event-sourced fault manager: durable fault log, DEM debounce, audit history."""
+
+
+def url_for(db: str | None, config: Path | None) -> str:
+    """The database URL of the commands that do not open a ledger (db, demo)."""
+    return prepare(db, config, Role.WRITER).url
 
 
 def parse_severity(text: str) -> int:
@@ -100,14 +95,18 @@ def report(
                                           help="0-3 or INFO/WARN/ERROR/CRITICAL.")] = "ERROR",
     description: Annotated[str, typer.Option("--description", "-d")] = "",
     source: Annotated[str, typer.Option("--source", help="Reporting source id.")] = "/cli",
-    at: Annotated[str | None, typer.Option("--at", help="When it happened (ISO 8601).")] = None,
+    at: Annotated[str | None, typer.Option(
+        "--at", help=f"When it happened: {TIME_HELP}. Default: now.")] = None,
+    shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
     """Record one FAILED or PASSED report."""
-    with opened(db, config, writer=True) as ledger:
+    setup = prepare(db, config, Role.WRITER, shifts=shifts)
+    moment = parse_time(at, "--at", setup.calendar)
+    with opened(setup) as ledger:
         result = ledger.report(fault_code, event_type, parse_severity(severity), description,
-                               source, parse_time(at, "--at"))
+                               source, moment)
         if not result.accepted:
             fail(f"report rejected: {result.message}", 1)
         fault = ledger.get_fault(fault_code)
@@ -122,54 +121,78 @@ def list_faults(
     all_statuses: Annotated[bool, typer.Option("--all", help="Every status.")] = False,
     severity: Annotated[str | None, typer.Option("--severity", "-s")] = None,
     at: Annotated[str | None, typer.Option(
-        "--at", help="Show the table as it was at this time (ISO 8601) or seq number.")] = None,
+        "--at", help=f"Show the table as it was at a seq number or a time: {TIME_HELP}.")
+    ] = None,
     as_json: JsonOption = False,
+    wide: WideOption = False,
+    shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
     """List faults (CONFIRMED by default, like the ROS list_faults service)."""
-    with opened(db, config) as ledger:
-        if at is not None:
-            faults = ledger.state_at(int(at) if SEQ_NUMBER.fullmatch(at)
-                                     else parse_time(at, "--at") or 0)
+    for name in status or []:
+        if name.strip().upper() not in FaultStatus.__members__:
+            fail(f"unknown status {printable(name)!r}; valid statuses: {STATUSES}")
+    setup = prepare(db, config, shifts=shifts)
+    moment = None if at is None else parse_moment(at, "--at", setup.calendar)
+    with opened(setup) as ledger:
+        if moment is not None:
+            faults = ledger.state_at(moment)
             title = f"faults at {at}"
         else:
-            statuses = [s.value for s in FaultStatus] if all_statuses else status or []
+            statuses = ([s.value for s in FaultStatus] if all_statuses
+                        else [name.strip().upper() for name in status or []])
             wanted_severity = None if severity is None else parse_severity(severity)
             faults = ledger.list_faults(statuses, wanted_severity)
             title = f"faults in {describe(ledger.url)}"
     if as_json:
         typer.echo(json.dumps([render.fault_dict(f) for f in faults], indent=2))
     else:
-        render.console().print(render.faults_table(faults, title))
+        out = render.console(wide=wide)
+        out.print(render.faults_table(faults, title, render.fit_width(out, wide)))
 
 
 @app.command()
 def show(
     fault_code: str,
     as_json: JsonOption = False,
+    wide: WideOption = False,
+    shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Show one fault (any status) with its status transitions."""
-    with opened(db, config) as ledger:
+    """Show one fault (any status), its status transitions and who last cleared it, why."""
+    with opened(prepare(db, config, shifts=shifts)) as ledger:
         lookup = ledger.lookup_fault(fault_code)
         if lookup.fault is None:
             fail(lookup.message, 1)
         moves = ledger.transitions(fault_code)
+        clears = ledger.history(code=fault_code, kinds=("fault_cleared",))
+    reasons = {r.seq: str(r.payload.get("reason", "")) for r in clears}
+    last = clears[-1] if clears else None
+    cleared = None if last is None else {
+        "seq": last.seq, "at": render.when(last.occurred_at),
+        "by": str(last.payload.get("actor", "")), "reason": reasons[last.seq]}
     if as_json:
         data = render.fault_dict(lookup.fault)
         data["transitions"] = [
             {"seq": t.seq, "at": render.when(from_ns(t.at_ns)),
              "from": t.from_status.value if t.from_status else None,
-             "to": t.to_status.value, "cause": t.cause, "by": t.source_id}
+             "to": t.to_status.value, "cause": t.cause, "by": t.source_id,
+             **({"reason": reasons[t.seq]} if t.seq in reasons else {})}
             for t in moves
         ]
+        data["last_cleared"] = cleared
         typer.echo(json.dumps(data, indent=2))
         return
-    out = render.console()
-    out.print(render.faults_table([lookup.fault], f"fault {fault_code}"))
-    out.print(render.transitions_table(moves))
+    out = render.console(wide=wide)
+    width = render.fit_width(out, wide)
+    out.print(render.faults_table([lookup.fault], f"fault {fault_code}", width))
+    if cleared is not None:
+        reason = cleared["reason"] or "(no reason given)"
+        out.print(cell(f"last cleared {render.short(last.occurred_at if last else None)} UTC "
+                       f"by {cleared['by']}: {reason}"))
+    out.print(render.transitions_table(moves, width, reasons))
 
 
 @app.command()
@@ -182,7 +205,7 @@ def clear(
 ) -> None:
     """Clear a fault (recorded with who and why)."""
     who = actor or f"cli:{_user()}"
-    with opened(db, config, writer=True) as ledger:
+    with opened(prepare(db, config, Role.WRITER)) as ledger:
         result = ledger.clear(fault_code, actor=who, reason=reason)
     if not result.success:
         fail(result.message, 1)
@@ -200,7 +223,7 @@ anchor_commands.register(app)
 @app.command()
 def rebuild(db: DbOption = None, config: ConfigOption = None) -> None:
     """Drop the projections and replay the whole log."""
-    with opened(db, config, writer=True) as ledger:
+    with opened(prepare(db, config, Role.WRITER)) as ledger:
         count = ledger.rebuild()
         faults = len(ledger.all_faults())
     typer.echo(f"rebuilt projections from {count} records: {faults} faults")
@@ -209,7 +232,7 @@ def rebuild(db: DbOption = None, config: ConfigOption = None) -> None:
 @db_app.command("upgrade")
 def db_upgrade(db: DbOption = None, config: ConfigOption = None) -> None:
     """Create the database or migrate it to the newest schema revision."""
-    database = Database(url_for(db, settings_for(config)))
+    database = Database(url_for(db, config))
     try:
         before = migrate.current_revision(database)
         head = migrate.ensure_current(database, upgrade=True)
@@ -221,7 +244,7 @@ def db_upgrade(db: DbOption = None, config: ConfigOption = None) -> None:
 @db_app.command("current")
 def db_current(db: DbOption = None, config: ConfigOption = None) -> None:
     """Print the database's schema revision and the newest one this version knows."""
-    database = Database(url_for(db, settings_for(config)), create=False)
+    database = Database(url_for(db, config), create=False)
     try:
         current = migrate.checked_revision(database)
     finally:
@@ -237,16 +260,20 @@ def serve(
     ctx: typer.Context,
     db: DbOption = None,
     config: ConfigOption = None,
+    follower: Annotated[bool, typer.Option(
+        "--follower", help="Serve reads only, as /fault_manager_follower, next to a running "
+        "/fault_manager on the same database; reports and clears are refused.")] = False,
 ) -> None:
     """Run the ROS 2 fault manager node (`/fault_manager`) until SIGINT/SIGTERM.
 
+    Refuses to start (exit 2) when another fault manager already serves the same names.
     ROS arguments follow, e.g. `--ros-args -p confirmation_threshold:=-3`.
     """
     try:
         from faultledger.ros.serve import serve as run_node
     except ImportError as error:
         fail(f"ROS 2 is not installed in this environment ({error}); run `make interfaces`")
-    raise typer.Exit(run_node(settings_for(config), db, list(ctx.args)))
+    raise typer.Exit(run_node(settings_for(config), db, list(ctx.args), follower=follower))
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
@@ -276,16 +303,32 @@ def nodes(
         "--once", help="Print one snapshot after --listen-sec and exit.")] = False,
     listen_sec: Annotated[float, typer.Option(
         "--listen-sec", min=0.0, help="With --once: how long to listen first.")] = 2.0,
+    sort: Annotated[str, typer.Option(
+        "--sort", help="name, state (worst first) or age (longest silent first); "
+        "key s cycles it.")] = "name",
+    name_filter: Annotated[str, typer.Option(
+        "--filter", help="Only nodes whose name contains this; key f or / sets it.")] = "",
+    state: Annotated[list[str] | None, typer.Option(
+        "--state", help="Only nodes in this state (LOST, RUNNING, ERROR...); repeatable.")
+    ] = None,
+    timeout_sec: Annotated[float, typer.Option(
+        "--timeout-sec", min=0.0, help="Silence after which a node shows LOST (the "
+        "node-state bridge's heartbeat_timeout_sec).")] = 5.0,
 ) -> None:
-    """Live view of every node's nodemon heartbeat (state, age, messages) until Ctrl-C.
+    """Live view of every node's nodemon heartbeat (state, age, last non-RUNNING state,
+    messages) until q or Ctrl-C.
 
     ROS arguments follow, e.g. `--ros-args -r __ns:=/robot1`.
     """
+    if sort not in ("name", "state", "age"):
+        fail(f"--sort must be name, state or age, got {printable(sort)!r}")
     try:
         from faultledger.ros.nodes_view import run_nodes_view
     except ImportError as error:
         fail(f"ROS 2 is not installed in this environment ({error}); run `make interfaces`")
-    raise typer.Exit(run_nodes_view(topic, once, listen_sec, list(ctx.args)))
+    raise typer.Exit(run_nodes_view(topic, once, listen_sec, list(ctx.args), sort=sort,
+                                    name_filter=name_filter, states=state or (),
+                                    timeout_sec=timeout_sec))
 
 
 @app.command()
@@ -293,7 +336,7 @@ def demo(db: DbOption = None, config: ConfigOption = None) -> None:
     """A short scripted scenario: PREFAILED -> CONFIRMED -> HEALED -> CLEARED, with history."""
     from faultledger.cli.demo import run_demo
 
-    run_demo(url_for(db, settings_for(config)), render.console())
+    run_demo(url_for(db, config), render.console())
 
 
 def _user() -> str:

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, Literal
 
+from rich.cells import cell_len
 from rich.console import Console
 from rich.table import Table
 from rich.text import Text
@@ -60,20 +62,86 @@ def fault_dict(fault: Fault) -> dict[str, Any]:
 
 
 
-def faults_table(faults: Iterable[Fault], title: str) -> Table:
-    """Every value from outside (code, sources, description, title) is shown literally:
-    ``safe_text.cell``, never markup, never a control character."""
-    table = Table(title=cell(title), title_justify="left")
-    for column in ("code", "status", "severity", "count", "counter", "last occurred (UTC)",
-                   "sources", "description"):
-        table.add_column(column, overflow="fold")
-    for f in faults:
-        table.add_row(
-            cell(f.fault_code), cell(f.status.value, _STATUS_STYLE[f.status]),
-            severity_name(f.severity), str(f.occurrence_count), str(f.debounce_counter),
-            short(f.last_occurred), cell(", ".join(f.reporting_sources)), cell(f.description),
-        )
+@dataclass(frozen=True, slots=True)
+class Column:
+    """A table column that may be left out when the terminal is too narrow.
+
+    ``drop``: 0 = always shown; otherwise the column with the highest ``drop`` is left out
+    first. ``no_wrap`` cells (codes, statuses, ids) are never split; the others fold, at
+    spaces first, down to ``cap`` characters.
+    """
+
+    header: str
+    drop: int = 0
+    no_wrap: bool = False
+    justify: Literal["left", "right", "center"] = "left"
+    cap: int = 14
+
+
+Cell = Text | str
+_BORDERS = 1
+"""Characters of a table's outer border on one side; each column adds padding and a rule."""
+
+
+def _plain(value: Cell) -> str:
+    return value.plain if isinstance(value, Text) else value
+
+
+def _floor(column: Column, cells: Iterable[Cell]) -> int:
+    """The narrowest this column can be without splitting what must not be split."""
+    texts = [column.header, *(_plain(c) for c in cells)]
+    if column.no_wrap:
+        return max(cell_len(line) for t in texts for line in t.splitlines() or [""])
+    words = [cell_len(w) for t in texts for w in t.split()] or [1]
+    return min(max(words), column.cap)
+
+
+def table_width(widths: Iterable[int]) -> int:
+    """The width of a default-box table whose columns have these content widths."""
+    items = list(widths)
+    return sum(items) + 3 * len(items) + _BORDERS
+
+
+def fitted(title: Cell, columns: Sequence[Column], rows: Sequence[Sequence[Cell]],
+           width: int | None) -> Table:
+    """A table of the columns that fit in ``width`` (None: every column, ``--wide``),
+    leaving out the droppable ones, highest ``drop`` first, until it fits."""
+    floors = [_floor(c, (row[i] for row in rows)) for i, c in enumerate(columns)]
+    keep = list(range(len(columns)))
+    if width is not None:
+        order = sorted((i for i, c in enumerate(columns) if c.drop),
+                       key=lambda i: -columns[i].drop)
+        for index in order:
+            if table_width(floors[i] for i in keep) <= width:
+                break
+            keep.remove(index)
+    table = Table(title=title, title_justify="left")
+    for i in keep:
+        c = columns[i]
+        table.add_column(c.header, justify=c.justify, no_wrap=c.no_wrap,
+                         overflow="ellipsis" if c.no_wrap else "fold",
+                         min_width=floors[i] if c.no_wrap else None)
+    for row in rows:
+        table.add_row(*(row[i] for i in keep))
     return table
+
+
+def faults_table(faults: Iterable[Fault], title: str, width: int | None = None) -> Table:
+    """Every value from outside (code, sources, description, title) is shown literally:
+    ``safe_text.cell``, never markup, never a control character. Columns that do not fit in
+    ``width`` go first: sources, description, counter, count, last occurred, severity."""
+    columns = (Column("code", no_wrap=True), Column("status", no_wrap=True),
+               Column("severity", drop=1, no_wrap=True),
+               Column("count", drop=3, justify="right"),
+               Column("counter", drop=4, justify="right"),
+               Column("last occurred (UTC)", drop=2, no_wrap=True),
+               Column("sources", drop=6), Column("description", drop=5))
+    rows: list[list[Cell]] = [
+        [cell(f.fault_code), cell(f.status.value, _STATUS_STYLE[f.status]),
+         severity_name(f.severity), str(f.occurrence_count), str(f.debounce_counter),
+         short(f.last_occurred), cell(", ".join(f.reporting_sources)), cell(f.description)]
+        for f in faults]
+    return fitted(cell(title), columns, rows, width)
 
 
 def summary(record: LogRecord) -> str:
@@ -94,29 +162,33 @@ def summary(record: LogRecord) -> str:
     return str(p.get("reason", ""))
 
 
-def history_table(records: Iterable[LogRecord]) -> Table:
-    table = Table(title="fault log", title_justify="left")
-    for column in ("seq", "occurred (UTC)", "kind", "code", "source", "details"):
-        table.add_column(column, overflow="fold")
-    for r in records:
-        table.add_row(str(r.seq), short(r.occurred_at), cell(r.kind), cell(r.fault_code or ""),
-                      cell(r.source_id or ""), cell(summary(r)))
-    return table
+def history_table(records: Iterable[LogRecord], width: int | None = None) -> Table:
+    """Columns that do not fit in ``width`` go first: source, kind, occurred."""
+    columns = (Column("seq", no_wrap=True, justify="right"),
+               Column("occurred (UTC)", drop=2, no_wrap=True),
+               Column("kind", drop=3), Column("code", no_wrap=True),
+               Column("source", drop=4), Column("details", drop=1, cap=16))
+    rows: list[list[Cell]] = [
+        [str(r.seq), short(r.occurred_at), cell(r.kind), cell(r.fault_code or ""),
+         cell(r.source_id or ""), cell(summary(r))] for r in records]
+    return fitted("fault log", columns, rows, width)
 
 
-def transitions_table(items: Iterable[Transition]) -> Table:
-    table = Table(title="status transitions", title_justify="left")
-    for column in ("seq", "at (UTC)", "from", "to", "cause", "by"):
-        table.add_column(column)
-    for t in items:
-        table.add_row(str(t.seq), short(from_ns(t.at_ns)),
-                      t.from_status.value if t.from_status else "(new)", t.to_status.value,
-                      cell(t.cause), cell(t.source_id))
-    return table
-
-
-
-
+def transitions_table(items: Iterable[Transition], width: int | None = None,
+                      reasons: dict[int, str] | None = None) -> Table:
+    """Columns that do not fit in ``width`` go first: cause, at. ``reasons``: the clear
+    reason of a seq, shown after its cause."""
+    why = reasons or {}
+    columns = (Column("seq", no_wrap=True, justify="right"),
+               Column("at (UTC)", drop=2, no_wrap=True),
+               Column("from", no_wrap=True), Column("to", no_wrap=True),
+               Column("cause", drop=3), Column("by", drop=1))
+    rows: list[list[Cell]] = [
+        [str(t.seq), short(from_ns(t.at_ns)),
+         t.from_status.value if t.from_status else "(new)", t.to_status.value,
+         cell(f"{t.cause}: {why[t.seq]}" if why.get(t.seq) else t.cause), cell(t.source_id)]
+        for t in items]
+    return fitted("status transitions", columns, rows, width)
 
 
 def describe_url(url: str) -> str:
@@ -131,8 +203,30 @@ def complain(label: str, message: str) -> None:
         Text.assemble((printable(label), "bold red"), " ", printable(message)))
 
 
-def console(stderr: bool = False) -> Console:
-    """Rich console; when piped (no terminal) tables get 200 columns instead of wrapping at 80."""
+def console(stderr: bool = False, *, wide: bool = False) -> Console:
+    """Rich console; when piped (no terminal) tables get 200 columns instead of wrapping at 80.
+    ``wide``: as wide as the widest table (``--wide``: every column, the terminal wraps)."""
     probe = Console(stderr=stderr)
     width = None if probe.is_terminal else 200
+    if wide:
+        width = max(probe.width, WIDE)
     return Console(stderr=stderr, highlight=False, soft_wrap=False, width=width)
+
+
+def say(text: str) -> None:
+    """One line of text on stdout, shown literally: wrapped at word boundaries to a terminal's
+    width, a single unwrapped line when piped (scripts read it whole)."""
+    out = console()
+    if out.is_terminal:
+        out.print(cell(text))
+    else:
+        print(printable(text), flush=True)
+
+
+WIDE = 1000
+"""The console width of ``--wide``: no table is cut to fit."""
+
+
+def fit_width(out: Console, wide: bool) -> int | None:
+    """The width tables are fitted to on ``out``: None (every column) with ``--wide``."""
+    return None if wide else out.width

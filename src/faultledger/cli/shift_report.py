@@ -15,7 +15,7 @@ from rich.console import Group, RenderableType
 from rich.table import Table
 from rich.text import Text
 
-from faultledger.cli.render import severity_name
+from faultledger.cli.render import Cell, Column, fitted, severity_name
 from faultledger.cli.safe_text import cell, printable
 from faultledger.domain.shifts import Period, ShiftCalendar, ShiftInstance
 from faultledger.domain.stat_rows import StatsRow
@@ -43,6 +43,30 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("stale_codes", "stale codes", "count"),
 )
 """(StatsRow field, label, kind) of the figures compared with the previous shift."""
+
+GLOSSARY: tuple[tuple[str, str], ...] = (
+    ("activations", "FAILED edges: a FAILED report whose previous report of the same code was "
+     "not FAILED (or the first ever, or the first after a clear). One e-stop press is one "
+     "activation, however often it is re-reported: \"e-stops per shift\" counts these"),
+    ("failed reports", "every FAILED report stored, repeats included (a held e-stop "
+     "re-reported each second is many failed reports, one activation)"),
+    ("aborted goals", "action goals that ended ABORTED, each goal once"),
+    ("confirmations", "changes to CONFIRMED: a fault passed its debounce threshold (or was "
+     "CRITICAL, or stayed PREFAILED past the timer)"),
+    ("heals", "changes to HEALED: the fault's reporter said PASSED often enough"),
+    ("clears", "changes to CLEARED: an operator cleared the fault (or startup did)"),
+    ("fault time CONFIRMED", "time faults spent CONFIRMED in the shift, summed over faults: "
+     "two faults CONFIRMED for one hour at once count two hours, so it can exceed the shift"),
+    ("MTTR", "mean time to repair: the mean length of the CONFIRMED episodes that ended "
+     "(HEALED or CLEARED) in the shift, from their start, which may be before the shift"),
+    ("MTBF", "mean time between failures: shift length / confirmations"),
+    ("time in flood", "% of the shift in 10-minute windows with more than 10 confirmations "
+     "(ISA-18.2 alarm flood)"),
+    ("chattering codes", "codes with 3 activations in less than 60 s"),
+    ("stale codes", "codes CONFIRMED for 24 h or more at some moment of the shift"),
+)
+"""(term, meaning) of every figure the report shows: `report-shift --glossary`, the HTML.
+The definitions in full: docs/statistics.md."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,17 +134,37 @@ class ShiftReport:
         start, end = self.local(self.shift.start), self.local(self.shift.end)
         return f"{start:%a %Y-%m-%d %H:%M} – {end:%a %Y-%m-%d %H:%M} {self.timezone}"
 
+    def figure(self, key: str) -> float | None:
+        return next((f.value for f in self.figures if f.key == key), None)
+
+    @property
+    def headline(self) -> str:
+        """Activations against failed reports in one line: ``5 activations (e-stop presses,
+        FAILED edges) from 12 failed reports; 3 aborted goals``."""
+        return (f"{self.row.activations} activations (e-stop presses, FAILED edges) from "
+                f"{self.row.failed_reports} failed reports; {self.row.confirmations} "
+                f"confirmations, {self.row.aborted_goals} aborted goals")
+
     @property
     def notes(self) -> tuple[str, ...]:
-        """Why a figure may look impossible: sums of durations over faults can exceed the
-        shift, and a shift still running is counted only up to ``as_of``."""
+        """Why a figure may look impossible: every duration that can exceed the shift says
+        why when it does (fault time CONFIRMED summed over faults, MTTR and episodes that
+        started before the shift)."""
         found: list[str] = []
-        active = next((f.value for f in self.figures if f.key == "active_seconds"), None)
+        active = self.figure("active_seconds")
         elapsed = (min(self.as_of, self.shift.end) - self.shift.start).total_seconds()
         if active is not None and active > elapsed > 0:
             found.append(f"fault time CONFIRMED ({duration(active)}) is summed over faults: "
                          f"several were CONFIRMED at the same time, so it exceeds the "
                          f"{duration(elapsed)} of the shift; see the downtimes below")
+        mttr = self.figure("mttr_seconds")
+        if mttr is not None and mttr > elapsed > 0:
+            found.append(f"MTTR ({duration(mttr)}) exceeds the {duration(elapsed)} of the "
+                         f"shift: it is the whole length of the episodes repaired in the "
+                         f"shift, which started before it")
+        if any(d.seconds > elapsed > 0 for d in self.downtimes):
+            found.append("a downtime's episode is longer than the shift: it started before "
+                         "the shift or lasted past it; \"in shift\" is the part inside")
         return tuple(found)
 
     @property
@@ -280,8 +324,10 @@ def group_text(row: StatsRow, key: str) -> str:
 
 
 # -- terminal ------------------------------------------------------------------------------------
-def terminal(report: ShiftReport) -> RenderableType:
-    """The report as rich renderables, for ``faultledger report-shift``."""
+def terminal(report: ShiftReport, width: int | None = None, *,
+             glossary: bool = False) -> RenderableType:
+    """The report as rich renderables, for ``faultledger report-shift``; every table fits in
+    ``width`` (None: every column, ``--wide``)."""
     shift = report.shift
     head = Text.assemble(("Shift report ", "bold"), (printable(shift.id), "bold cyan"))
     lines = [head, cell(f"{report.span_text}, {report.length_text}")]
@@ -290,75 +336,81 @@ def terminal(report: ShiftReport) -> RenderableType:
                           "yellow"))
     compared = report.previous.id if report.previous else "no previous instance"
     lines.append(cell(f"compared with {compared}", "dim"))
+    lines.append(cell(report.headline, "bold"))
     notes = [cell(f"note: {note}", "yellow") for note in report.notes]
-    parts: list[RenderableType] = [*lines, _figures_table(report), *notes,
-                                   _offenders_table(report), _downtimes_table(report),
-                                   _hours_table(report)]
+    parts: list[RenderableType] = [*lines, _figures_table(report, width), *notes,
+                                   _offenders_table(report, width),
+                                   _downtimes_table(report, width),
+                                   _hours_table(report, width)]
+    if glossary:
+        parts.append(Text("glossary", style="bold"))
+        parts.extend(Text.assemble((f"{term}: ", "bold"), meaning)
+                     for term, meaning in GLOSSARY)
+    else:
+        parts.append(cell("what the figures mean: faultledger report-shift --glossary "
+                          "(or docs/statistics.md)", "dim"))
     return Group(*parts)
 
 
-def _figures_table(report: ShiftReport) -> Table:
+def _figures_table(report: ShiftReport, width: int | None = None) -> Table:
     previous = report.previous.id if report.previous else "previous"
-    table = Table(title="key figures", title_justify="left")
-    table.add_column("figure")
-    table.add_column(cell(report.shift.id), justify="right")
-    table.add_column(cell(previous), justify="right")
-    table.add_column("change", justify="right")
-    table.add_column("change %", justify="right")
-    for item in report.figures:
-        table.add_row(item.label, value_text(item.kind, item.value),
-                      value_text(item.kind, item.previous), change_text(item),
-                      percent_text(item))
-    return table
+    columns = (Column("figure", cap=12), Column(report.shift.id, justify="right",
+                                                no_wrap=True),
+               Column(previous, drop=1, justify="right", no_wrap=True),
+               Column("change", drop=2, justify="right", no_wrap=True),
+               Column("change %", drop=3, justify="right", no_wrap=True))
+    rows: list[list[Cell]] = [
+        [item.label, value_text(item.kind, item.value), value_text(item.kind, item.previous),
+         change_text(item), percent_text(item)] for item in report.figures]
+    return fitted("key figures", columns, rows, width)
 
 
-def _offenders_table(report: ShiftReport) -> Table:
-    table = Table(title=f"top {TOP} offenders (by activations, then confirmations)",
-                  title_justify="left")
-    for column in ("#", "code", "activations", "confirmations", "failed reports",
-                   "active time", "MTTR"):
-        table.add_column(column, justify="left" if column == "code" else "right")
-    for rank, row in enumerate(report.offenders, 1):
-        table.add_row(str(rank), cell(group_text(row, "code")), str(row.activations),
-                      str(row.confirmations), str(row.failed_reports),
-                      duration(row.active_seconds), duration(row.mttr_seconds))
+def _offenders_table(report: ShiftReport, width: int | None = None) -> Table:
+    columns = (Column("#", justify="right", no_wrap=True), Column("code", no_wrap=True),
+               Column("activations", justify="right", no_wrap=True),
+               Column("confirmations", drop=2, justify="right", no_wrap=True),
+               Column("failed reports", drop=3, justify="right", cap=8),
+               Column("active time", drop=4, justify="right", cap=8),
+               Column("MTTR", drop=5, justify="right", no_wrap=True))
+    rows: list[list[Cell]] = [
+        [str(rank), cell(group_text(row, "code")), str(row.activations),
+         str(row.confirmations), str(row.failed_reports), duration(row.active_seconds),
+         duration(row.mttr_seconds)] for rank, row in enumerate(report.offenders, 1)]
     if not report.offenders:
-        table.add_row("", "(no failed reports)", "", "", "", "", "")
-    return table
+        rows.append(["", "(no failed reports)", "", "", "", "", ""])
+    return fitted(f"top {TOP} offenders (by activations, then confirmations)", columns, rows,
+                  width)
 
 
-def _downtimes_table(report: ShiftReport) -> Table:
-    table = Table(title=cell(f"longest downtimes (CONFIRMED episodes, {report.timezone})"),
-                  title_justify="left")
-    for column in ("code", "source", "severity", "confirmed at", "ended", "in shift",
-                   "episode"):
-        table.add_column(column, justify="right" if column in ("in shift", "episode")
-                         else "left")
-    for d in report.downtimes:
-        table.add_row(cell(d.fault_code), cell(d.source_id), severity_name(d.severity),
-                      local_time(report, d.start), local_time(report, d.end),
-                      duration(d.seconds_in_range), duration(d.seconds))
+def _downtimes_table(report: ShiftReport, width: int | None = None) -> Table:
+    columns = (Column("code", no_wrap=True), Column("source", drop=5),
+               Column("severity", drop=4, no_wrap=True), Column("confirmed at", drop=2, cap=10),
+               Column("ended", drop=3, cap=10), Column("in shift", justify="right", no_wrap=True),
+               Column("episode", drop=1, justify="right", no_wrap=True))
+    rows: list[list[Cell]] = [
+        [cell(d.fault_code), cell(d.source_id), severity_name(d.severity),
+         local_time(report, d.start), local_time(report, d.end),
+         duration(d.seconds_in_range), duration(d.seconds)] for d in report.downtimes]
     if not report.downtimes:
-        table.add_row("(none)", "", "", "", "", "", "")
-    return table
+        rows.append(["(none)", "", "", "", "", "", ""])
+    return fitted(cell(f"longest downtimes (CONFIRMED episodes, {report.timezone})"), columns,
+                  rows, width)
 
 
-def _hours_table(report: ShiftReport) -> Table:
-    table = Table(title=cell(f"per hour ({report.timezone})"), title_justify="left")
-    table.add_column("hour")
-    table.add_column("activations", justify="right")
-    table.add_column("")
-    table.add_column("confirmations", justify="right")
-    table.add_column("")
-    table.add_column("aborted goals", justify="right")
-    table.add_column("")
+def _hours_table(report: ShiftReport, width: int | None = None) -> Table:
+    bar = 20 if width is None or width >= 110 else 6
+    columns = (Column("hour", no_wrap=True),
+               Column("activations", justify="right", no_wrap=True), Column("", drop=3),
+               Column("confirmations", justify="right", no_wrap=True), Column("", drop=2),
+               Column("aborted goals", justify="right", no_wrap=True), Column("", drop=1))
     peak = max([1, *(max(h.activations, h.confirmations, h.aborted_goals)
                      for h in report.hours)])
-    for hour in report.hours:
-        table.add_row(cell(hour.label), str(hour.activations), _bar(hour.activations, peak, "red"),
-                      str(hour.confirmations), _bar(hour.confirmations, peak, "yellow"),
-                      str(hour.aborted_goals), _bar(hour.aborted_goals, peak, "blue"))
-    return table
+    rows: list[list[Cell]] = [
+        [cell(hour.label), str(hour.activations), _bar(hour.activations, peak, "red", bar),
+         str(hour.confirmations), _bar(hour.confirmations, peak, "yellow", bar),
+         str(hour.aborted_goals), _bar(hour.aborted_goals, peak, "blue", bar)]
+        for hour in report.hours]
+    return fitted(cell(f"per hour ({report.timezone})"), columns, rows, width)
 
 
 def _bar(value: int, peak: int, style: str, width: int = 20) -> Text:

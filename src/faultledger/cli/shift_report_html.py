@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import io
+import textwrap
 from functools import lru_cache
 from typing import Any
 
@@ -22,6 +23,7 @@ from matplotlib.ticker import MaxNLocator
 from faultledger.cli.render import severity_name
 from faultledger.cli.safe_text import printable
 from faultledger.cli.shift_report import (
+    GLOSSARY,
     TOP,
     ShiftReport,
     change_text,
@@ -79,10 +81,11 @@ def _draw_offenders(ax: Axes, report: ShiftReport) -> None:
     ax.grid(axis="x", alpha=0.3)
 
 
-def _png(figure: Figure) -> bytes:
+def _png(figure: Figure, top: float = 1.0) -> bytes:
+    """``top``: the fraction of the height the axes may use (the rest: a text panel)."""
     FigureCanvasAgg(figure)  # the Agg canvas: no GUI, no pyplot state, no display needed
     out = io.BytesIO()
-    figure.tight_layout()
+    figure.tight_layout(rect=(0.0, 0.0, 1.0, top))
     figure.savefig(out, format="png", metadata={"Software": None})
     return out.getvalue()
 
@@ -99,15 +102,41 @@ def offenders_png(report: ShiftReport) -> bytes:
     return _png(figure)
 
 
+def key_figures_lines(report: ShiftReport) -> list[str]:
+    """The text panel of the PNG: the shift, its span and the main counts, so the image
+    alone says what it shows."""
+    row = report.row
+    lines = [f"Shift {report.shift.id}: {report.span_text}",
+             report.headline,
+             f"{row.heals} heals, {row.clears} clears; fault time CONFIRMED "
+             f"{duration(row.active_seconds)} (summed over faults), MTTR "
+             f"{duration(row.mttr_seconds)}, MTBF {duration(row.mtbf_seconds)}",
+             f"time in flood {row.flood_percent:.1f} %, {row.chattering_codes} chattering "
+             f"codes, {row.stale_codes} stale codes"]
+    if report.in_progress:
+        lines.append(f"in progress: figures up to {local_time(report, report.as_of)}")
+    return [printable(line) for line in lines]
+
+
+PANEL_WIDTH = 110
+"""Characters a line of the PNG's text panel holds (monospace, 9 pt, 10 inches)."""
+
+
 def charts_png(report: ShiftReport) -> bytes:
-    """Both charts in one image (``report-shift --png``)."""
+    """The key figures (a text panel: shift id, span, main counts) and both charts in one
+    image (``report-shift --png``)."""
     rows = max(len(report.offenders), 2)
-    figure = Figure(figsize=(10, 5.5 + 0.45 * rows), dpi=DPI)
+    panel = [part for line in key_figures_lines(report)
+             for part in textwrap.wrap(line, PANEL_WIDTH, subsequent_indent="  ")]
+    panel_height = 0.2 * len(panel) + 0.5
+    height = 5.5 + panel_height + 0.45 * rows
+    figure = Figure(figsize=(10, height), dpi=DPI)
     top, bottom = figure.subplots(2, 1, height_ratios=[4, 1.5 + 0.45 * rows])
     _draw_hours(top, report)
     _draw_offenders(bottom, report)
-    figure.suptitle(f"Shift report {report.shift.id} — {report.span_text}")
-    return _png(figure)
+    figure.text(0.01, 1 - 0.15 / height, "\n".join(panel), ha="left", va="top",
+                family="monospace", fontsize=9)
+    return _png(figure, top=1 - panel_height / height)
 
 
 # -- HTML ----------------------------------------------------------------------------------------
@@ -190,6 +219,8 @@ def html(report: ShiftReport) -> str:
         "length_text": report.length_text,
         "previous_id": report.previous.id if report.previous else None,
         "notes": report.notes,
+        "headline": report.headline,
+        "glossary": [{"term": term, "meaning": meaning} for term, meaning in GLOSSARY],
         "in_progress_until": (local_time(report, report.as_of) if report.in_progress
                               else None),
         "dst_change": shift.seconds != report.nominal_seconds,

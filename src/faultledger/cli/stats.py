@@ -10,47 +10,39 @@ import csv
 import io
 import json
 import sys
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import fields
 from datetime import datetime
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import Annotated
 
 import typer
 from rich.table import Table
 
 from faultledger.cli import render
+from faultledger.cli.options import (
+    TIME_HELP,
+    ConfigOption,
+    DbOption,
+    ShiftsOption,
+    WideOption,
+    fail,
+    opened,
+    parse_time,
+    prepare,
+)
+from faultledger.cli.render import Cell, Column, fitted
 from faultledger.cli.safe_text import cell, printable
 from faultledger.cli.shift_report import build_report, duration, group_text, terminal
-from faultledger.domain.periods import PERIOD_KINDS, default_calendar, parse_bound
+from faultledger.domain.periods import PERIOD_KINDS
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import GROUP_KEYS, StatsRow
-from faultledger.errors import FaultLedgerError
-from faultledger.service.config import load_settings, load_shift_calendar
-from faultledger.service.ledger import FaultLedger
 from faultledger.service.output_files import OutputFileError, check_target, write_output
 
-# The same options as cli/main.py's (kept here: main imports this module, not the reverse).
-DbOption = Annotated[
-    str | None,
-    typer.Option("--db", envvar="FAULTLEDGER_DB", show_envvar=True,
-                 help="Database URL (default: the config's, else sqlite:///var/faultledger.db)."),
-]
-ConfigOption = Annotated[
-    Path | None,
-    typer.Option("--config", envvar="FAULTLEDGER_CONFIG", show_envvar=True,
-                 help="YAML configuration file (see config/faultledger.yaml)."),
-]
-ShiftsOption = Annotated[
-    Path | None,
-    typer.Option("--shifts", help="Shift calendar YAML (see config/shifts.yaml). Default: the "
-                 "config's `shifts`, else UTC morning/afternoon/night from 06:00."),
-]
 AsOfOption = Annotated[
     str | None,
-    typer.Option("--as-of", help="End CONFIRMED episodes still open at this time (default: "
-                 "now); a date, date-time (local to the calendar) or shift id."),
+    typer.Option("--as-of", help=f"End CONFIRMED episodes still open at this time (default: "
+                 f"now): {TIME_HELP}."),
 ]
 _FIGURES = [f.name for f in fields(StatsRow) if f.name not in ("period", "group")]
 _PERIOD_FIELDS = ["period", "period_name", "production_day", "start", "end"]
@@ -62,42 +54,8 @@ def register(app: typer.Typer) -> None:
     app.command("report-shift")(report_shift)
 
 
-def fail(message: str, code: int = 2) -> NoReturn:
-    """One line on stderr and a non-zero exit, like the other commands' errors."""
-    render.complain("error:", message)
-    raise typer.Exit(code)
-
-
-@contextmanager
-def reading(db: str | None, config: Path | None, shifts: Path | None
-            ) -> Iterator[tuple[FaultLedger, ShiftCalendar]]:
-    """A read-only ledger (never creates, migrates or records, like `list`/`history`) and the
-    calendar: ``--shifts``, else the config's ``shifts``, else the built-in default. Service
-    errors become one-line messages with exit code 2."""
-    try:
-        settings = load_settings(config)
-        path = shifts or settings.shifts
-        calendar = default_calendar() if path is None else load_shift_calendar(path)
-        ledger = FaultLedger.open(db or settings.database.url, create=False, upgrade=False,
-                                  max_batch=settings.database.max_batch, background=False,
-                                  calendar=calendar)
-    except FaultLedgerError as error:
-        fail(str(error))
-    try:
-        yield ledger, calendar
-    except FaultLedgerError as error:
-        fail(str(error))
-    finally:
-        ledger.close()
-
-
 def _as_of(text: str | None, calendar: ShiftCalendar) -> datetime | None:
-    if text is None:
-        return None
-    try:
-        return parse_bound(text, calendar, upper=False)
-    except ValueError as error:
-        fail(f"--as-of: {error}")
+    return parse_time(text, "--as-of", calendar)
 
 
 # -- stats ---------------------------------------------------------------------------------------
@@ -110,8 +68,7 @@ def stats(
         "--group-by", help=f"Group rows by {', '.join(GROUP_KEYS)} (repeatable; action: "
         "goal outcomes per action, with source only).")] = None,
     since: Annotated[str | None, typer.Option(
-        "--since", help="Start (inclusive): 2026-11-21, 2026-11-21T06:00 (calendar-local "
-        "unless it has an offset) or a shift id (its start). Default: until - 24 h.")] = None,
+        "--since", help=f"Start (inclusive): {TIME_HELP}. Default: until - 24 h.")] = None,
     until: Annotated[str | None, typer.Option(
         "--until", help="End (exclusive): like --since; a shift id means its end. "
         "Default: --as-of, else now (what happened a second ago is counted).")] = None,
@@ -120,23 +77,32 @@ def stats(
                        ] = False,
     as_csv: Annotated[bool, typer.Option("--csv", help="CSV of every figure, header row.")
                       ] = False,
+    wide: WideOption = False,
     shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Fault statistics per shift, day, hour or 10 minutes (docs/statistics.md)."""
+    """Fault statistics per shift, day, hour or 10 minutes (docs/statistics.md).
+
+    Narrow terminals show the first columns only (--wide: all; --json/--csv: every figure).
+    """
     if as_json and as_csv:
         fail("choose one of --json and --csv")
     groups = group_by or []
-    with reading(db, config, shifts) as (ledger, calendar):
-        rows = ledger.stats(by, since, until, code, groups, calendar=calendar,
-                            as_of=_as_of(as_of, calendar))
+    setup = prepare(db, config, shifts=shifts)
+    calendar = setup.calendar
+    first = parse_time(since, "--since", calendar)
+    last = parse_time(until, "--until", calendar, upper=True)
+    moment = _as_of(as_of, calendar)
+    with opened(setup) as ledger:
+        rows = ledger.stats(by, first, last, code, groups, calendar=calendar, as_of=moment)
     if as_json:
         typer.echo(json.dumps([row.as_dict() for row in rows], indent=2))
     elif as_csv:
         sys.stdout.write(stats_csv(rows, groups))
     else:
-        render.console().print(stats_table(rows, by, groups, calendar, code))
+        out = render.console(wide=wide)
+        out.print(stats_table(rows, by, groups, calendar, code, render.fit_width(out, wide)))
 
 
 def stats_csv(rows: Sequence[StatsRow], group_by: Sequence[str]) -> str:
@@ -151,9 +117,11 @@ def stats_csv(rows: Sequence[StatsRow], group_by: Sequence[str]) -> str:
 
 
 def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
-                calendar: ShiftCalendar, codes: Sequence[str] | None) -> Table:
+                calendar: ShiftCalendar, codes: Sequence[str] | None,
+                width: int | None = None) -> Table:
     """The figures people read first; --json/--csv have all of them. Rows grouped by action
-    hold goal figures only (docs/statistics.md): they show the three goal counts."""
+    hold goal figures only (docs/statistics.md): they show the three goal counts. Columns that
+    do not fit in ``width`` go from the right (the least read first)."""
     zone = calendar.zone
     title = f"statistics by {by}"
     if rows:
@@ -162,33 +130,35 @@ def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
                   f"{last.astimezone(zone):%Y-%m-%d %H:%M} {calendar.timezone}")
     if codes:
         title += f", codes {' '.join(codes)}"
-    table = Table(title=cell(title), title_justify="left")
-    table.add_column("period", overflow="fold")
-    table.add_column("local time", overflow="fold")
-    for key in group_by:
-        table.add_column(cell(key), overflow="fold")
     goals_only = "action" in group_by
-    columns = (("aborted goals", "canceled goals", "succeeded goals") if goals_only else
+    figures = (("aborted goals", "canceled goals", "succeeded goals") if goals_only else
                ("failed", "activations", "aborted goals", "confirmations", "heals", "clears",
                 "active", "MTTR", "flood %", "chattering", "stale"))
-    for column in columns:
-        table.add_column(column, justify="right")
+    # Dropped first: the last figure; then the others right to left, the local time before
+    # the first two figures; the period and the group keys stay.
+    ranks = {name: i + 2 for i, name in enumerate(figures)}
+    ranks[figures[0]], ranks[figures[1]] = 2, 1
+    columns = [Column("period", no_wrap=True), Column("local time", drop=3, cap=16),
+               *(Column(key, no_wrap=True) for key in group_by),
+               *(Column(name, drop=ranks[name], justify="right", no_wrap=True)
+                 for name in figures)]
+    table_rows: list[list[Cell]] = []
     for row in rows:
         start, end = row.period.start.astimezone(zone), row.period.end.astimezone(zone)
         span = (f"{start:%Y-%m-%d %H:%M}–{end:%H:%M}" if end.date() == start.date()
                 else f"{start:%Y-%m-%d %H:%M}–{end:%Y-%m-%d %H:%M}")
-        figures = ([str(row.aborted_goals), str(row.canceled_goals), str(row.succeeded_goals)]
-                   if goals_only else
-                   [str(row.failed_reports), str(row.activations), str(row.aborted_goals),
-                    str(row.confirmations), str(row.heals), str(row.clears),
-                    duration(row.active_seconds), duration(row.mttr_seconds),
-                    f"{row.flood_percent:.1f}", str(row.chattering_codes),
-                    str(row.stale_codes)])
-        table.add_row(cell(row.period.id), span,
-                      *(cell(group_text(row, key)) for key in group_by), *figures)
+        values = ([str(row.aborted_goals), str(row.canceled_goals), str(row.succeeded_goals)]
+                  if goals_only else
+                  [str(row.failed_reports), str(row.activations), str(row.aborted_goals),
+                   str(row.confirmations), str(row.heals), str(row.clears),
+                   duration(row.active_seconds), duration(row.mttr_seconds),
+                   f"{row.flood_percent:.1f}", str(row.chattering_codes),
+                   str(row.stale_codes)])
+        table_rows.append([cell(row.period.id), span,
+                           *(cell(group_text(row, key)) for key in group_by), *values])
     if not rows:
-        table.add_row("(no rows)", *[""] * (len(group_by) + len(columns) + 1))
-    return table
+        table_rows.append(["(no rows)", *[""] * (len(columns) - 1)])
+    return fitted(cell(title), columns, table_rows, width)
 
 
 # -- report-shift --------------------------------------------------------------------------------
@@ -203,6 +173,9 @@ def report_shift(
     force: Annotated[bool, typer.Option(
         "--force", help="Replace existing --html/--png files (default: refuse).")] = False,
     as_of: AsOfOption = None,
+    glossary: Annotated[bool, typer.Option(
+        "--glossary", help="Also explain every figure (activations, flood, MTTR…).")] = False,
+    wide: WideOption = False,
     shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
@@ -215,9 +188,12 @@ def report_shift(
                 check_target(target, force)  # refuse before any work, write nothing
             except OutputFileError as error:
                 fail(str(error))
-    with reading(db, config, shifts) as (ledger, calendar):
-        report = build_report(ledger, calendar, shift_id, _as_of(as_of, calendar))
-    render.console().print(terminal(report))
+    setup = prepare(db, config, shifts=shifts)
+    moment = _as_of(as_of, setup.calendar)
+    with opened(setup) as ledger:
+        report = build_report(ledger, setup.calendar, shift_id, moment)
+    out = render.console(wide=wide)
+    out.print(terminal(report, render.fit_width(out, wide), glossary=glossary))
     if html_file is None and png_file is None:
         return
     from faultledger.cli import shift_report_html  # matplotlib: only when a file is wanted

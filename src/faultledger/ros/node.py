@@ -161,26 +161,33 @@ class ReadPool:
 class FaultManagerNode:
     """Services and publisher of `/fault_manager`, bound to an open ledger."""
 
-    def __init__(self, node: Node, ledger: FaultLedger) -> None:
+    def __init__(self, node: Node, ledger: FaultLedger, *, read_only: bool = False,
+                 leader: str = "/" + NODE_NAME) -> None:
+        """``read_only``: a follower (docs/ros.md "A second fault manager"): the write
+        services answer a refusal naming ``leader``, nothing is published, nothing written."""
         self.node = node
         self.ledger = ledger
         self.log = node.get_logger()
+        self.read_only = read_only
+        self.leader = leader
         self.events = node.create_publisher(FaultEvent, "~/events", EVENTS_QOS)
+
+        def write(callback: ServiceCallback, name: str) -> ServiceCallback:
+            return guard_service(self._refuse_write(name) if read_only else callback,
+                                 self.log, name)
+
         self.report_service = node.create_service(
-            ReportFault, "~/report_fault",
-            guard_service(self.report_fault, self.log, "report_fault"),
+            ReportFault, "~/report_fault", write(self.report_fault, "report_fault"),
             qos_profile=SERVICE_QOS)
         self.report_once_service = node.create_service(
             ReportFaultOnce, "~/report_fault_once",
-            guard_service(self.report_fault_once, self.log, "report_fault_once"),
-            qos_profile=SERVICE_QOS)
+            write(self.report_fault_once, "report_fault_once"), qos_profile=SERVICE_QOS)
         self.goal_service = node.create_service(
             ReportGoalOutcome, "~/report_goal_outcome",
-            guard_service(self.report_goal_outcome, self.log, "report_goal_outcome"),
-            qos_profile=SERVICE_QOS)
+            write(self.report_goal_outcome, "report_goal_outcome"), qos_profile=SERVICE_QOS)
         self.clear_service = node.create_service(
-            ClearFault, "~/clear_fault",
-            guard_service(self.clear_fault, self.log, "clear_fault"), qos_profile=SERVICE_QOS)
+            ClearFault, "~/clear_fault", write(self.clear_fault, "clear_fault"),
+            qos_profile=SERVICE_QOS)
         # Reads: a reentrant group, so a read awaiting the pool holds up neither the reports
         # (the node's default, mutually exclusive group) nor other reads.
         self.read_group = ReentrantCallbackGroup()
@@ -200,6 +207,17 @@ class FaultManagerNode:
             for kind, name, callback in reads)]
         self.subscription = ledger.subscribe(
             guard_callback(self.publish, self.log, "events publisher"))
+
+    def _refuse_write(self, name: str) -> ServiceCallback:
+        """A follower's answer to a write: refused, with where to send it instead."""
+        text = (f"{self.node.get_fully_qualified_name()} is a read-only follower: {name} "
+                f"refused; send it to {self.leader}/{name}")
+
+        def refuse(_request: Any, response: Any) -> Any:
+            self.log.warning(text)
+            return fail(response, text)
+
+        return refuse
 
     def publish(self, notification: Notification) -> None:
         """Called by the ledger after the change is durable, in log order."""

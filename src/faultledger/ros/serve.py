@@ -25,7 +25,8 @@ from faultledger.ros.guard import clip, guard_callback
 from faultledger.ros.network import scope
 from faultledger.ros.node import NODE_NAME, FaultManagerNode, declare_policy
 from faultledger.service.anchors import AnchorScheduler
-from faultledger.service.config import Settings, load_shift_calendar
+from faultledger.service.bootstrap import Role, open_ledger, resolve
+from faultledger.service.config import Settings
 from faultledger.service.ledger import FaultLedger
 from faultledger.store.database import describe
 
@@ -90,18 +91,81 @@ def security_failure(step: str, error: Exception) -> Exception:
         "docs/ros.md, 'Network scope and security')")
 
 
-def create_node() -> Node:
+FOLLOWER_NAME = f"{NODE_NAME}_follower"
+"""A read-only follower's node name: it coexists with the manager it follows."""
+DISCOVERY_WAIT_SEC = 1.5
+"""How long ``serve`` watches the ROS graph for another manager before serving."""
+
+
+def create_node(name: str = NODE_NAME) -> Node:
     """The ``/fault_manager`` node (``security_failure`` when it cannot be created)."""
     try:
-        return Node(NODE_NAME)
+        return Node(name)
     except Exception as error:
         raise security_failure("creating the node", error) from error
 
 
-def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
-    """Serve until a signal; the database URL is --db, else ``database_path``, else config."""
-    # Before ROS starts: a bad shift calendar stops the manager with the file's message.
-    calendar = None if settings.shifts is None else load_shift_calendar(settings.shifts)
+def other_manager(node: Node, follower: bool, wait_sec: float = DISCOVERY_WAIT_SEC
+                  ) -> str | None:
+    """Why ``node`` must not serve, or None: within ``wait_sec`` the graph shows another
+    node of the same name, or (unless ``follower``) someone already serving its
+    ``report_fault``. Called before our services exist, so any server found is another."""
+    fqn = node.get_fully_qualified_name()
+    name, namespace = node.get_name(), node.get_namespace()
+    service = f"{fqn}/report_fault"
+    deadline = time.monotonic() + wait_sec
+    while True:
+        same = sum(1 for n, ns in node.get_node_names_and_namespaces()
+                   if n == name and ns == namespace)
+        served = not follower and any(
+            s == service for s, _ in node.get_service_names_and_types())
+        if same > 1 or served:
+            break
+        if time.monotonic() >= deadline:
+            return None
+        time.sleep(0.05)
+    if not answers(node, f"{fqn}/list_faults"):
+        return None  # a process killed with -9 stays in the graph until its lease expires
+    what = f"serves {service}" if served else f"runs as {fqn}"
+    other = fqn  # the service is <node>/report_fault; rcl does not say which process
+    role = "fault manager follower" if follower else "fault manager"
+    return (f"another {role} already {what} (node {other}, pid unknown); stop it, use "
+            f"another namespace (--ros-args -r __ns:=/robot2)"
+            + ("" if follower else ", or start this one as --follower"))
+
+
+def answers(node: Node, service: str, timeout_sec: float = 2.0) -> bool:
+    """Whether someone answers a ``ListFaults`` on ``service`` within ``timeout_sec``."""
+    from ros2_medkit_msgs.srv import ListFaults
+
+    client = node.create_client(ListFaults, service)
+    try:
+        if not client.wait_for_service(timeout_sec=timeout_sec):
+            return False
+        future = client.call_async(ListFaults.Request())
+        executor = SingleThreadedExecutor()  # our own, dropped before serving starts
+        executor.add_node(node)
+        deadline = time.monotonic() + timeout_sec
+        while not future.done() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        executor.remove_node(node)
+        # Bounded: shutdown() waits for work in flight, and a reply arriving after the
+        # deadline leaves a task it would wait for forever.
+        executor.shutdown(timeout_sec=1.0)
+        return bool(future.done())
+    finally:
+        node.destroy_client(client)
+
+
+def serve(settings: Settings, db_url: str | None, ros_args: list[str],
+          follower: bool = False) -> int:
+    """Serve until a signal; the database URL is --db, else ``database_path``, else config.
+
+    ``follower``: a read-only follower (``fault_manager_follower``) on the same database:
+    reads only, never writes (docs/ros.md "A second fault manager")."""
+    role = Role.READER if follower else Role.SERVER
+    # Before ROS starts: a bad database URL or shift calendar stops with its message.
+    resolve(settings, role, db=db_url, shifts=settings.shifts)
     try:
         rclpy.init(args=["faultledger", *ros_args],
                    signal_handler_options=SignalHandlerOptions.NO)
@@ -116,10 +180,20 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     print(network_line(), flush=True)
     try:
-        node = create_node()
+        node = create_node(FOLLOWER_NAME if follower else NODE_NAME)
     except BaseException:
         try_shutdown()
         raise
+    try:
+        refusal = other_manager(node, follower)
+    except BaseException:
+        node.destroy_node()
+        try_shutdown()
+        raise
+    if refusal is not None:
+        node.destroy_node()
+        try_shutdown()
+        raise ConfigError(refusal)
     ledger: FaultLedger | None = None
     manager: FaultManagerNode | None = None
     bridges: list[RunningBridge] = []
@@ -129,23 +203,27 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str]) -> int:
         node.declare_parameter("database_path", "")
         policy = declare_policy(node, settings.policy)
         path = str(node.get_parameter("database_path").value or "")
-        url = db_url or (f"sqlite:///{path}" if path else settings.database.url)
-        ledger = FaultLedger.open(url, policy=policy, max_batch=settings.database.max_batch,
-                                  calendar=calendar)
-        anchors = AnchorScheduler.from_settings(ledger, settings.anchors)
+        config = resolve(settings, role, db=db_url, database_path=path,
+                         policy=None if follower else policy, shifts=settings.shifts)
+        url = config.url
+        ledger = open_ledger(config)
+        # A follower writes nothing: no anchors, no bridges (the manager it follows runs them).
+        anchors = None if follower else AnchorScheduler.from_settings(ledger, settings.anchors)
         if anchors is not None:
             anchors.start()  # an anchor file every interval, one more at shutdown
-        manager = FaultManagerNode(node, ledger)
+        leader = f"{node.get_namespace().rstrip('/')}/{NODE_NAME}"
+        manager = FaultManagerNode(node, ledger, read_only=follower, leader=leader)
         executor.add_node(node)
         for name, entry in settings.bridges.items():
-            if entry.get("enabled", False):
+            if entry.get("enabled", False) and not follower:
                 bridges.append(start_bridge(name, settings_from(entry), executor,
                                             manager=node.get_fully_qualified_name()))
         restored = ledger.restored
+        mode = f" follower of {leader} (read-only)" if follower else ""
         print(f"fault_manager ready: db={describe(url)} faults={restored.faults} "
-              f"events={restored.events} replayed={restored.replayed}", flush=True)
+              f"events={restored.events} replayed={restored.replayed}{mode}", flush=True)
         node.get_logger().info(
-            f"serving {node.get_fully_qualified_name()} on {describe(url)}: restored "
+            f"serving {node.get_fully_qualified_name()}{mode} on {describe(url)}: restored "
             f"{restored.faults} faults from {restored.events} events")
         spin_until(executor, stop)
         if manager is not None:

@@ -16,9 +16,9 @@ from faultledger.store.database import Database, describe, translate_errors
 
 
 def migrations_dir() -> Path:
-    """``migrations/`` of the source tree (installed editable), or $FAULTLEDGER_MIGRATIONS."""
+    """The package's ``faultledger/migrations/`` (in the wheel too), or $FAULTLEDGER_MIGRATIONS."""
     override = os.environ.get("FAULTLEDGER_MIGRATIONS")
-    path = Path(override) if override else Path(__file__).resolve().parents[3] / "migrations"
+    path = Path(override) if override else Path(__file__).resolve().parents[1] / "migrations"
     if not (path / "env.py").is_file():
         raise StoreError(f"Alembic migrations not found at {path}; set FAULTLEDGER_MIGRATIONS")
     return path

@@ -1,4 +1,4 @@
-"""SQLAlchemy tables; Alembic migrations in ``migrations/`` create and change them."""
+"""SQLAlchemy tables; Alembic migrations in ``faultledger/migrations/`` create and change them."""
 
 from __future__ import annotations
 

@@ -19,6 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from faultledger.ros.bridges.node_state_mapping import (
+    HEARTBEAT_TIMEOUT_SEC,
     BadMessage,
     NodeStateMonitor,
     Report,
@@ -49,7 +50,7 @@ class Settings(BaseModel):
     """The bridge's YAML (config/node_state.yaml); defaults are the documented behaviour."""
 
     topic: str = Field(default=TOPIC, min_length=1)
-    heartbeat_timeout_sec: float = Field(default=5.0, gt=0)
+    heartbeat_timeout_sec: float = Field(default=HEARTBEAT_TIMEOUT_SEC, gt=0)
     check_period_sec: float = Field(default=0.5, gt=0)
     error_severity: int = Field(default=2, ge=0, le=3)
     fatal_severity: int = Field(default=3, ge=0, le=3)

@@ -33,6 +33,17 @@ _HASH_LEN = 8
 _NOT_ALNUM = re.compile(r"[^A-Za-z0-9]+")
 
 
+HEARTBEAT_TIMEOUT_SEC = 5.0
+"""Default silence after which a node's heartbeat is lost (bridge and ``faultledger nodes``)."""
+
+
+def heartbeat_lost(state: int | None, last_seen: float, now: float,
+                   timeout_sec: float = HEARTBEAT_TIMEOUT_SEC) -> bool:
+    """The one timeout rule: silent for longer than ``timeout_sec`` (steady clock, seconds)
+    and its last state was not STOPPING (a clean exit is no loss)."""
+    return state != STOPPING and now - last_seen > timeout_sec
+
+
 def code_name(nodename: str) -> str:
     """``/robot1/lidar_driver`` → ``ROBOT1_LIDAR_DRIVER``; "" when nothing usable is left.
 
@@ -112,7 +123,8 @@ class NodeStateMonitor:
       as any message of the node arrives again; after STOPPING silence is a clean exit.
     """
 
-    def __init__(self, timeout_sec: float = 5.0, severities: Severities | None = None) -> None:
+    def __init__(self, timeout_sec: float = HEARTBEAT_TIMEOUT_SEC,
+                 severities: Severities | None = None) -> None:
         self.timeout_sec = timeout_sec
         self.severities = severities or Severities()
         self.nodes: dict[str, NodeInfo] = {}
@@ -163,7 +175,8 @@ class NodeStateMonitor:
         once per silence; a node whose last state was STOPPING exited cleanly."""
         reports: list[Report] = []
         for node in self.nodes.values():
-            if node.lost or node.state == STOPPING or now - node.last_seen <= self.timeout_sec:
+            if node.lost or not heartbeat_lost(node.state, node.last_seen, now,
+                                               self.timeout_sec):
                 continue
             node.lost = True
             last = STATE_NAMES.get(node.state, "none") if node.state is not None else "none"
