@@ -16,7 +16,7 @@ from faultledger.ros.guard import clip
 RANGES = ("OFF", "LOCALHOST", "SUBNET", "SYSTEM_DEFAULT")
 DEFAULT_RANGE = "SUBNET"
 """Jazzy's default when ROS_AUTOMATIC_DISCOVERY_RANGE is unset or empty (measured with these
-wheels: SPDP multicast on every interface, /work/shared/ros-wheels.md §4)."""
+wheels: SPDP multicast on every interface, docs/ros-wheels.md)."""
 
 
 @dataclass(frozen=True)
