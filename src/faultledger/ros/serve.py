@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import faulthandler
+import os
 import signal
+import sys
 import threading
 import time
 from types import FrameType
@@ -19,6 +22,7 @@ from rclpy.utilities import (
     try_shutdown,
 )
 
+from faultledger.domain.text import printable
 from faultledger.errors import ConfigError
 from faultledger.ros.bridges.runner import RunningBridge, settings_from, start_bridge
 from faultledger.ros.guard import clip, guard_callback
@@ -134,6 +138,22 @@ def other_manager(node: Node, follower: bool, wait_sec: float = DISCOVERY_WAIT_S
             + ("" if follower else ", or start this one as --follower"))
 
 
+CHECK_DEADLINE_SEC = 20.0
+"""Longest the check for another fault manager (and a refused start's teardown) may take."""
+
+
+def _give_up(found: list[str]) -> None:
+    """The watchdog of the start-up check: say why, and end the process (exit 2)."""
+    why = found[0] if found else (
+        f"could not finish checking the ROS graph for another fault manager within "
+        f"{CHECK_DEADLINE_SEC:.0f} s (rclpy did not return); not serving")
+    print(f"error: {printable(why)}", file=sys.stderr, flush=True)
+    if not found and os.environ.get("FAULTLEDGER_DEBUG"):
+        faulthandler.dump_traceback(file=sys.stderr)  # where rclpy hung
+    sys.stdout.flush()
+    os._exit(2)
+
+
 def answers(node: Node, service: str, timeout_sec: float = 2.0) -> bool:
     """Whether someone answers a ``ListFaults`` on ``service`` within ``timeout_sec``."""
     from ros2_medkit_msgs.srv import ListFaults
@@ -184,16 +204,26 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
     except BaseException:
         try_shutdown()
         raise
+    # rclpy occasionally hangs in the graph check or in tearing a refused node down (seen
+    # under load): a refused start must still end, with its message and exit 2.
+    found: list[str] = []
+    watchdog = threading.Timer(CHECK_DEADLINE_SEC, _give_up, (found,))
+    watchdog.daemon = True
+    watchdog.start()
     try:
         refusal = other_manager(node, follower)
     except BaseException:
+        watchdog.cancel()
         node.destroy_node()
         try_shutdown()
         raise
     if refusal is not None:
-        node.destroy_node()
-        try_shutdown()
-        raise ConfigError(refusal)
+        # Said and ended here: tearing down a node that spun a client, and the interpreter's
+        # exit after it, sometimes hang in the DDS layer (seen under load); nothing of ours
+        # needs cleaning up yet (no ledger is open).
+        found.append(refusal)
+        _give_up(found)
+    watchdog.cancel()
     ledger: FaultLedger | None = None
     manager: FaultManagerNode | None = None
     bridges: list[RunningBridge] = []
