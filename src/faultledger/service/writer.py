@@ -313,20 +313,14 @@ class Writer:
                 self._reclaim = not self._connection.reclaim()
             if len(group) > 1 and isinstance(error, WriteConflictError):
                 # Still conflicting after catching up: a constraint one command breaks.
-                log.warning("commit of %d commands failed (%s); committing each alone",
-                            len(group), clipped(error))
-                for pending in group:
-                    self._commit([pending])
+                self._commit_each(group, error)
                 return
             self._fail(group, error)
             return
         except Exception as error:  # a bug must not leave callers waiting forever
             self._head = None
             if len(group) > 1:
-                log.warning("commit of %d commands failed (%s); committing each alone",
-                            len(group), clipped(error))
-                for pending in group:
-                    self._commit([pending])
+                self._commit_each(group, error)
                 return
             log.error("command %s failed: %s", type(group[0].command).__name__,
                       clipped(error))
@@ -338,6 +332,14 @@ class Writer:
             self._announce(batch.notifications)
         for pending in group:
             pending.done = True
+
+    def _commit_each(self, group: list[_Pending], error: BaseException) -> None:
+        """Isolation: commit every command of a failed group alone, so only the culprit
+        fails and the others are committed."""
+        log.warning("commit of %d commands failed (%s); committing each alone", len(group),
+                    clipped(error))
+        for pending in group:
+            self._commit([pending])
 
     def _write(self, group: list[_Pending]) -> _Batch:
         """Build, append and project one group in one transaction; the projector is staged
