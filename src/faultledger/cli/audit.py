@@ -12,7 +12,7 @@ import json
 import os
 import sys
 from collections.abc import Callable, Iterable, Iterator
-from datetime import UTC, datetime
+from datetime import UTC
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, TextIO
@@ -35,6 +35,7 @@ from faultledger.cli.options import (
 )
 from faultledger.cli.options import fail as _fail
 from faultledger.cli.safe_text import cell
+from faultledger.domain.clock import iso_ns
 from faultledger.domain.events import KINDS
 from faultledger.domain.integrity import GENESIS_HASH
 from faultledger.errors import FaultLedgerError
@@ -256,12 +257,6 @@ def state_at(
 
 
 # -- export ----------------------------------------------------------------------------------
-def iso_ns(ns: int) -> str:
-    """ISO 8601 UTC with all nine digits of the stored nanoseconds."""
-    seconds, rest = divmod(ns, 1_000_000_000)
-    return (datetime.fromtimestamp(seconds, tz=UTC).strftime("%Y-%m-%dT%H:%M:%S")
-            + f".{rest:09d}+00:00")
-
 
 def export_row(record: StoredRecord) -> dict[str, Any]:
     """One record as an export object; ``payload`` is the stored canonical JSON, parsed."""

@@ -34,3 +34,11 @@ def in_range(ns: int) -> bool:
 def from_ns(ns: int) -> datetime:
     seconds, rest = divmod(ns, NS_PER_SECOND)
     return datetime.fromtimestamp(seconds, tz=UTC).replace(microsecond=rest // 1_000)
+
+
+def iso_ns(ns: int) -> str:
+    """ISO 8601 UTC with all nine digits of the nanoseconds (exports, anchors): a datetime
+    would keep only microseconds."""
+    seconds, rest = divmod(ns, NS_PER_SECOND)
+    return (datetime.fromtimestamp(seconds, tz=UTC).strftime("%Y-%m-%dT%H:%M:%S")
+            + f".{rest:09d}+00:00")

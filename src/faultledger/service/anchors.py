@@ -37,7 +37,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import (
     Ed25519PublicKey,
 )
 
-from faultledger.domain.clock import NS_PER_SECOND
+from faultledger.domain.clock import NS_PER_SECOND, iso_ns
 from faultledger.domain.integrity import canonical_json
 from faultledger.errors import FaultLedgerError
 from faultledger.service.config import AnchorSettings
@@ -175,12 +175,6 @@ def _signed_fields(seq: int, digest: str, recorded_at_ns: int, anchored_at_ns: i
             "recorded_at": iso_ns(recorded_at_ns), "anchored_at_ns": anchored_at_ns,
             "anchored_at": iso_ns(anchored_at_ns), "key_id": key}
 
-
-def iso_ns(ns: int) -> str:
-    """ISO 8601 UTC with all nine digits of the nanoseconds."""
-    seconds, rest = divmod(ns, NS_PER_SECOND)
-    return (datetime.fromtimestamp(seconds, tz=UTC).strftime("%Y-%m-%dT%H:%M:%S")
-            + f".{rest:09d}+00:00")
 
 
 def make_anchor(ledger: FaultLedger, key: Ed25519PrivateKey, *,
