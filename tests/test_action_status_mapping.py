@@ -26,12 +26,11 @@ from faultledger.ros.bridges.action_status_mapping import (
     SeenGoals,
     Transition,
     action_of_topic,
-    fault_code,
     goal_text,
     is_watched,
     net_state,
-    upper_snake,
 )
+from faultledger.ros.bridges.codes import MAX_CODE_LENGTH, fault_code, upper_snake
 
 
 def gid(n: int) -> bytes:
@@ -77,41 +76,61 @@ def test_action_names_become_upper_snake(action: str, snake: str) -> None:
     assert upper_snake(action) == snake
 
 
+def code(prefix: str, action: str, suffix: str) -> str:
+    """The bridge's code: ``<prefix>_<ACTION>_<suffix>`` by the shared rule."""
+    return fault_code(action, prefix=f"{prefix}_", suffix=suffix)
+
+
 def test_short_codes_are_prefix_name_suffix() -> None:
-    assert fault_code("ACTION", "/navigate_to_pose", "ABORTED") == "ACTION_NAVIGATE_TO_POSE_ABORTED"
-    assert fault_code("NAV", "/robot1/arm/follow_joint_trajectory", "CANCELED") == \
+    assert code("ACTION", "/navigate_to_pose", "ABORTED") == "ACTION_NAVIGATE_TO_POSE_ABORTED"
+    assert code("NAV", "/robot1/arm/follow_joint_trajectory", "CANCELED") == \
         "NAV_ROBOT1_ARM_FOLLOW_JOINT_TRAJECTORY_CANCELED"
 
 
+def test_the_tracker_reports_the_shared_codes() -> None:
+    action = "/robot1/joint_trajectory_controller/follow_joint_trajectory_" + "x" * 120
+    failed, = ActionTracker(Rules("NAV")).observe(action, [(gid(1), STATUS_ABORTED)])
+    assert failed.code == code("NAV", action, "ABORTED")
+    assert len(failed.code) == MAX_CODE_LENGTH and failed.code.endswith("_ABORTED")
+
+
 def test_long_codes_are_cut_hashed_and_keep_the_suffix() -> None:
-    base = "/robot1/joint_trajectory_controller/follow_joint_trajectory_with_extra_words"
+    base = "/robot1/joint_trajectory_controller/follow_joint_trajectory_with_extra_words" * 2
     one, two = base + "_left", base + "_right"
-    codes = [fault_code("ACTION", a, s) for a in (one, two) for s in ("ABORTED", "CANCELED")]
+    codes = [code("ACTION", a, s) for a in (one, two) for s in ("ABORTED", "CANCELED")]
     assert len(set(codes)) == 4
-    for code in codes:
-        assert len(code) <= 64
-        assert fault_code_error(code) is None
-        pattern = r"ACTION_ROBOT1_JOINT_TRAJECTORY_[A-Z_]*_[0-9A-F]{6}_(ABORTED|CANCELED)"
-        assert re.fullmatch(pattern, code), code
+    for c in codes:
+        assert len(c) == MAX_CODE_LENGTH
+        assert fault_code_error(c) is None
+        pattern = r"ACTION_ROBOT1_JOINT_TRAJECTORY_[A-Z0-9_]*_[0-9A-F]{8}_(ABORTED|CANCELED)"
+        assert re.fullmatch(pattern, c), c
     assert codes[0].endswith("_ABORTED") and codes[1].endswith("_CANCELED")
     # Deterministic: the same action always gets the same code.
-    assert fault_code("ACTION", one, "ABORTED") == codes[0]
+    assert code("ACTION", one, "ABORTED") == codes[0]
 
 
-def test_a_code_of_exactly_64_characters_is_not_hashed() -> None:
-    action = "/" + "a" * (64 - len("ACTION__ABORTED"))
-    code = fault_code("ACTION", action, "ABORTED")
-    assert len(code) == 64 and code == f"ACTION_{'A' * 49}_ABORTED"
-    assert len(fault_code("ACTION", action + "b", "ABORTED")) == 64
+def test_a_code_of_exactly_128_characters_is_not_hashed() -> None:
+    action = "/" + "a" * (128 - len("ACTION__ABORTED"))
+    c = code("ACTION", action, "ABORTED")
+    assert len(c) == 128 and c == f"ACTION_{'A' * 113}_ABORTED"
+    assert len(code("ACTION", action + "b", "ABORTED")) == 128
+    assert code("ACTION", action + "b", "ABORTED") != c
+
+
+def test_codes_up_to_128_characters_are_no_longer_hashed() -> None:
+    """Up to 0.1.0 the limit was 64 (and sha1): such a name now keeps its full code."""
+    action = "/robot1/joint_trajectory_controller_of_the_left_arm_of_the_robot/follow_joint"
+    assert code("ACTION", action, "ABORTED") == \
+        "ACTION_ROBOT1_JOINT_TRAJECTORY_CONTROLLER_OF_THE_LEFT_ARM_OF_THE_ROBOT_FOLLOW_JOINT_ABORTED"
 
 
 def test_the_longest_prefix_still_fits() -> None:
-    code = fault_code("P" * 32, "/" + "x" * 200, "CANCELED")
-    assert len(code) <= 64 and code.endswith("_CANCELED") and fault_code_error(code) is None
+    c = code("P" * 32, "/" + "x" * 200, "CANCELED")
+    assert len(c) <= 128 and c.endswith("_CANCELED") and fault_code_error(c) is None
 
 
 def test_a_name_without_letters_gets_the_hash() -> None:
-    assert re.fullmatch(r"ACTION_[0-9A-F]{6}_ABORTED", fault_code("ACTION", "/__", "ABORTED"))
+    assert re.fullmatch(r"ACTION_[0-9A-F]{8}_ABORTED", code("ACTION", "/__", "ABORTED"))
 
 
 def test_status_topics_name_their_action() -> None:

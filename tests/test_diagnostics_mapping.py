@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -9,13 +10,12 @@ from typing import Any
 import pytest
 
 from faultledger.domain.validation import fault_code_error
+from faultledger.ros.bridges.codes import fault_code, upper_snake
 from faultledger.ros.bridges.diagnostics_mapping import (
     MAX_TRACKED,
     EdgeTracker,
     Report,
     Settings,
-    Throttle,
-    generate_code,
     level_of,
 )
 from faultledger.ros.bridges.settings import normalise, read_yaml
@@ -76,20 +76,27 @@ def test_levels_arrive_as_bytes_or_int(raw: object, level: int | None) -> None:
     (":::", ""), ("", ""), ("日本", ""),
 ])
 def test_generated_codes_are_upper_snake_case(name: str, code: str) -> None:
-    assert generate_code(name) == code
+    assert upper_snake(name) == code
     if code:
+        assert fault_code(name) == code
         assert fault_code_error(code) is None
+        t, _ = tracker()
+        assert t.code_for(Status(name)) == code
 
 
 def test_generated_codes_take_the_prefix_and_stay_within_128_characters() -> None:
-    assert generate_code("battery: Voltage", "DIAG_") == "DIAG_BATTERY_VOLTAGE"
+    t, _ = tracker(code_prefix="DIAG_")
+    assert t.code_for(Status("battery: Voltage")) == "DIAG_BATTERY_VOLTAGE"
     long_a, long_b = "x" * 300 + " a", "x" * 300 + " b"
-    code_a, code_b = generate_code(long_a, "P."), generate_code(long_b, "P.")
+    t, _ = tracker(code_prefix="P.")
+    code_a, code_b = t.code_for(Status(long_a)), t.code_for(Status(long_b))
+    assert code_a is not None and code_b is not None
     assert len(code_a) == len(code_b) == 128
     assert code_a != code_b and code_a.startswith("P.XXX")
+    assert re.fullmatch(r"P\.X+_[0-9A-F]{8}", code_a)  # upper-case hex (lower-case up to 0.1.0)
     assert fault_code_error(code_a) is None and fault_code_error(code_b) is None
-    assert generate_code(long_a, "P.") == code_a  # stable
-    assert len(generate_code("x" * 128)) == 128 and generate_code("x" * 128) == "X" * 128
+    assert t.code_for(Status(long_a)) == code_a  # stable
+    assert len(fault_code("x" * 128)) == 128 and fault_code("x" * 128) == "X" * 128
 
 
 # -- settings --------------------------------------------------------------------------------------
@@ -248,21 +255,6 @@ def test_memory_of_failing_statuses_is_bounded() -> None:
     edge.process([Status(f"s{i}", ERROR) for i in range(MAX_TRACKED + 2)])
     assert edge.failing == MAX_TRACKED
     assert [k for k, _ in warnings] == ["tracked", "tracked"]
-
-
-# -- throttled warnings ----------------------------------------------------------------------------
-def test_throttle_one_message_per_kind_per_interval() -> None:
-    now = [0.0]
-    out: list[str] = []
-    throttle = Throttle(out.append, 10.0, clock=lambda: now[0])
-    throttle("a", "first a")
-    throttle("a", "second a")
-    throttle("b", "first b")
-    now[0] = 5.0
-    throttle("a", "third a")
-    now[0] = 10.5
-    throttle("a", "fourth a")
-    assert out == ["first a", "first b", "fourth a (2 similar warnings suppressed)"]
 
 
 def test_the_shipped_config_holds_exactly_the_defaults() -> None:

@@ -13,16 +13,14 @@ import pytest
 
 from faultledger.domain.validation import fault_code_error
 from faultledger.ros.bridges import hardware_status_mapping as m
+from faultledger.ros.bridges.codes import fault_code, upper_snake
 from faultledger.ros.bridges.hardware_status_mapping import (
     CONDITIONS,
     HardwareStatusMapper,
     Settings,
     Severities,
-    Throttle,
     Transition,
-    fault_code,
     resolve_severities,
-    upper_snake,
 )
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "bridges" / "hardware_status.md"
@@ -219,24 +217,48 @@ def test_control_msgs_earlier_field_name_hardware_status_is_read() -> None:
 # -- codes -----------------------------------------------------------------------------------------
 def test_upper_snake() -> None:
     assert upper_snake("left_arm/wheelMotor-1") == "LEFT_ARM_WHEEL_MOTOR_1"
-    assert upper_snake("RRBot") == "RRBOT"
+    assert upper_snake("RRBot") == "RR_BOT"  # "RRBOT" up to 0.1.0 (acronyms were not split)
     assert upper_snake("  joint 1 ") == "JOINT_1"
-    assert re.fullmatch(r"ID_[0-9A-F]{6}", upper_snake("/"))
-    assert upper_snake("/") != upper_snake("//")
+    assert upper_snake("Motör") == "MOTOR"  # "MOT_R" up to 0.1.0 (accents were not dropped)
+    assert upper_snake("/") == ""
+
+
+def code(prefix: str, hardware_id: str, device_id: str, suffix: str) -> str:
+    """What the mapper reports: ``<PREFIX>_<HW>_<DEVICE>_<SUFFIX>`` (shared rule)."""
+    return fault_code(hardware_id, device_id, prefix=f"{prefix}_" if prefix else "",
+                      suffix=suffix)
 
 
 def test_codes_are_valid_bounded_and_distinct() -> None:
-    assert fault_code("HW", "pal_arm", "base_motor", "EMERGENCY_STOP") == \
+    assert code("HW", "pal_arm", "base_motor", "EMERGENCY_STOP") == \
         "HW_PAL_ARM_BASE_MOTOR_EMERGENCY_STOP"
-    assert fault_code("", "arm", "j1", "ERROR_HW") == "ARM_J1_ERROR_HW"
-    long_a = fault_code("HW", "h" * 200, "device_a", "CANOPEN_EMCY_8130")
-    long_b = fault_code("HW", "h" * 200, "device_b", "CANOPEN_EMCY_8130")
-    for code in (long_a, long_b):
-        assert len(code) == 128
-        assert code.endswith("_CANOPEN_EMCY_8130")
-        assert fault_code_error(code) is None
+    assert code("", "arm", "j1", "ERROR_HW") == "ARM_J1_ERROR_HW"
+    long_a = code("HW", "h" * 200, "device_a", "CANOPEN_EMCY_8130")
+    long_b = code("HW", "h" * 200, "device_b", "CANOPEN_EMCY_8130")
+    for c in (long_a, long_b):
+        assert len(c) == 128
+        assert c.endswith("_CANOPEN_EMCY_8130")
+        assert fault_code_error(c) is None
     assert long_a != long_b
-    assert fault_code_error(fault_code("HW", "ä..ö", "../x", "SAFETY_STOP")) is None
+    assert fault_code_error(code("HW", "ä..ö", "../x", "SAFETY_STOP")) is None
+
+
+def test_an_id_without_letters_or_digits_gets_a_hash() -> None:
+    """Up to 0.1.0 such an id became ``ID_<6 hex>`` in place; now the code is hashed."""
+    slash = code("HW", "/", "motor", "SAFETY_STOP")
+    assert re.fullmatch(r"HW_MOTOR_[0-9A-F]{8}_SAFETY_STOP", slash)
+    assert slash != code("HW", "//", "motor", "SAFETY_STOP")
+    assert slash != code("HW", "motor", "/", "SAFETY_STOP")
+
+
+def test_the_mapper_reports_the_shared_codes() -> None:
+    dev = device("wheelMotor", [generic(errors=(m.EMERGENCY_STOP_HW,))])
+    mp = mapper(code_prefix="hw")
+    transitions, _ = mp.update(status(dev, hardware_id="left_arm"))
+    assert [t.code for t in transitions] == ["HW_LEFT_ARM_WHEEL_MOTOR_EMERGENCY_STOP"]
+    assert transitions[0].code == code("HW", "left_arm", "wheelMotor", "EMERGENCY_STOP")
+    transitions, _ = mapper(code_prefix="").update(status(dev, hardware_id="h" * 200))
+    assert transitions[0].code == code("", "h" * 200, "wheelMotor", "EMERGENCY_STOP")
 
 
 def test_source_id_is_the_hardware_id_or_the_override() -> None:
@@ -327,16 +349,6 @@ def test_hardware_ids_tracked_are_bounded() -> None:
     assert len(run(mp, status(device("d", msg), hardware_id="b"))) == 1
     transitions, warnings = mp.update(status(device("d", msg), hardware_id="c"))
     assert transitions == [] and [k for k, _ in warnings] == ["max_hardware"]
-
-
-def test_throttle() -> None:
-    now = [0.0]
-    out: list[str] = []
-    throttle = Throttle(out.append, 10.0, lambda: now[0])
-    assert throttle.warn("a", "1") and not throttle.warn("a", "2") and throttle.warn("b", "3")
-    now[0] = 10.0
-    assert throttle.warn("a", "4")
-    assert out == ["1", "3", "4"]
 
 
 def test_real_message_classes_are_read_by_field_name() -> None:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import pytest
 
 from faultledger.domain.validation import fault_code_error
+from faultledger.ros.bridges.codes import fault_code as shared_fault_code
+from faultledger.ros.bridges.codes import upper_snake
 from faultledger.ros.bridges.node_state_mapping import (
     ERROR,
     FATAL,
@@ -17,14 +19,16 @@ from faultledger.ros.bridges.node_state_mapping import (
     NodeStateMonitor,
     Report,
     Severities,
-    Throttle,
-    code_name,
     describe,
-    fault_code,
 )
 
 NODE = "/robot1/lidar_driver"
 P = "NODE_ROBOT1_LIDAR_DRIVER_"
+
+
+def fault_code(nodename: str, suffix: str) -> str:
+    """``NODE_<NAME>_<SUFFIX>`` by the bridges' shared rule."""
+    return shared_fault_code(nodename, prefix="NODE_", suffix=suffix)
 
 
 def failed(suffix: str, severity: int, description: str, node: str = NODE) -> Report:
@@ -45,12 +49,16 @@ def codes(reports: list[Report]) -> list[tuple[str, str]]:
     ("/talker", "TALKER"),
     ("lidar", "LIDAR"),
     ("/a//b-c.d", "A_B_C_D"),
-    ("/ümlaut/node", "MLAUT_NODE"),
+    ("/ümlaut/node", "UMLAUT_NODE"),  # "MLAUT_NODE" up to 0.1.0
+    ("/robot1/lidarDriver", "ROBOT1_LIDAR_DRIVER"),  # "ROBOT1_LIDARDRIVER" up to 0.1.0
     ("/", ""),
     ("", ""),
 ])
-def test_code_name_is_upper_snake_case(nodename: str, name: str) -> None:
-    assert code_name(nodename) == name
+def test_node_names_are_upper_snake_case(nodename: str, name: str) -> None:
+    assert upper_snake(nodename) == name
+    if name:
+        m = NodeStateMonitor()
+        assert m.on_message(nodename, ERROR, 0.0)[0].code == f"NODE_{name}_ERROR"
 
 
 def test_codes_are_valid_and_long_names_are_cut_with_a_hash() -> None:
@@ -63,9 +71,10 @@ def test_codes_are_valid_and_long_names_are_cut_with_a_hash() -> None:
             assert len(code) <= 128 and fault_code_error(code) is None, code
     assert fault_code(long_a, "HEARTBEAT_LOST") != fault_code(long_b, "HEARTBEAT_LOST")
     assert len(fault_code(long_a, "HEARTBEAT_LOST")) == 128
-    # all codes of one node share the same <NAME>
-    assert fault_code(long_a, "ERROR")[:-len("ERROR")] == \
-        fault_code(long_a, "HEARTBEAT_LOST")[:-len("HEARTBEAT_LOST")]
+    assert len(fault_code(long_a, "ERROR")) == 128
+    # the codes of one long node share its hash (the cut name is longer for a shorter suffix)
+    digest = fault_code(long_a, "HEARTBEAT_LOST")[-len("12345678_HEARTBEAT_LOST"):][:8]
+    assert fault_code(long_a, "ERROR").endswith(f"_{digest}_ERROR")
 
 
 def test_description_carries_both_messages() -> None:
@@ -177,12 +186,3 @@ def test_bad_messages_raise_and_change_nothing(nodename: str, state: int) -> Non
         m.on_message(nodename, state, 0.9)
     assert m.nodes[NODE].last_seen == 0.0 and m.nodes[NODE].state == RUNNING
     assert set(m.nodes) == {NODE}
-
-
-def test_throttle_counts_what_it_holds_back() -> None:
-    t = Throttle(10.0)
-    assert t.allow(0.0) == 0
-    assert t.allow(1.0) is None
-    assert t.allow(9.9) is None
-    assert t.allow(10.0) == 2
-    assert t.allow(25.0) == 0

@@ -28,8 +28,8 @@ from faultledger.ros.bridges.action_status_mapping import (
     STATUS_EXECUTING,
     STATUS_SUCCEEDED,
     STATUS_UNKNOWN,
-    fault_code,
 )
+from faultledger.ros.bridges.codes import MAX_CODE_LENGTH, fault_code
 
 if TYPE_CHECKING:
     from tests.ros.conftest import ManagerFactory, RosClient
@@ -115,9 +115,9 @@ def test_standalone_bridge_turns_status_arrays_into_edges(
         nav = "ACTION_ROBOT1_NAVIGATE_TO_POSE_ABORTED"
         path = "ACTION_ROBOT1_FOLLOW_PATH_ABORTED"
         bad = "ACTION_ROBOT1_BAD_ABORTED"
-        long_action = ("/robot1/joint_trajectory_controller_of_the_left_arm_of_the_robot/"
-                       "follow_joint_trajectory")
-        long_code = fault_code("ACTION", long_action, "ABORTED")
+        long_action = ("/robot1/joint_trajectory_controller_of_the_left_arm_of_the_robot_on_the_"
+                       "mobile_base_of_cell_four/follow_joint_trajectory_with_tolerances")
+        long_code = fault_code(long_action, prefix="ACTION_", suffix="ABORTED")
 
         def saw(text: str) -> Callable[[], bool]:
             return lambda: text in bridge.stderr()
@@ -170,8 +170,8 @@ def test_standalone_bridge_turns_status_arrays_into_edges(
         server.send("goals", "/robot1/bad", [[3, STATUS_ABORTED]])
         wait_for(f"{bad} reported", lambda: reports(client, bad) == [("FAILED", source)])
 
-        # A name too long for 64 characters: cut, hashed, suffix kept.
-        assert len(long_code) <= 64 and long_code.endswith("_ABORTED")
+        # A name too long for 128 characters: cut, hashed, suffix kept.
+        assert len(long_code) == MAX_CODE_LENGTH and long_code.endswith("_ABORTED")
         assert long_code.startswith("ACTION_ROBOT1_JOINT_TRAJECTORY_CONTROLLER_")
         wait_for(f"{long_code} reported", lambda: reports(client, long_code) == [
             ("FAILED", source)])

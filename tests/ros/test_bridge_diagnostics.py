@@ -21,7 +21,7 @@ import pytest
 import yaml
 from tests.ros.processes import LineProcess
 
-from faultledger.ros.bridges.diagnostics_mapping import generate_code
+from faultledger.ros.bridges.codes import fault_code
 
 if TYPE_CHECKING:
     from tests.ros.conftest import ManagerFactory, RosClient
@@ -167,7 +167,7 @@ class TestDiagnosticsBridge:
         assert rig.client.fault(code).severity == 3  # the manager never lowers severity
 
     def test_codes_from_map_values_and_names_and_hardware_sources(self, rig: Rig) -> None:
-        long_code = generate_code(LONG_NAME)
+        long_code = fault_code(LONG_NAME)
         assert len(long_code) == 128
         rig.publish(
             status("lidar: Status", ERROR, hardware_id=""),  # name_to_code; no hardware_id

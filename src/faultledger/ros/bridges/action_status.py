@@ -25,7 +25,6 @@ from faultledger.ros.bridges.action_status_mapping import (
     STATUS_NAMES,
     STATUS_TYPE,
     TERMINAL,
-    UPPER_SNAKE,
     WHOLE_ARRAY,
     ActionTracker,
     Goal,
@@ -39,8 +38,8 @@ from faultledger.ros.bridges.action_status_mapping import (
     goal_text,
     is_watched,
     status_name,
-    upper_snake,
 )
+from faultledger.ros.bridges.codes import UPPER_SNAKE, upper_snake
 from faultledger.ros.guard import guard_callback
 from faultledger.ros.reporter import FaultReporter
 

@@ -27,14 +27,14 @@ Separately from the faults, each goal's terminal status becomes one goal outcome
 
 from __future__ import annotations
 
-import hashlib
-import re
 import uuid
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Literal
+
+from faultledger.ros.bridges.codes import fault_code
 
 STATUS_TOPIC_SUFFIX = "/_action/status"
 STATUS_TYPE = "action_msgs/msg/GoalStatusArray"
@@ -55,8 +55,6 @@ STATUS_NAMES = {
 }
 TERMINAL = frozenset({STATUS_SUCCEEDED, STATUS_CANCELED, STATUS_ABORTED})
 
-MAX_CODE_LENGTH = 64
-HASH_LENGTH = 6
 MAX_GOALS_IN_DESCRIPTION = 5
 
 Goal = tuple[bytes, int]
@@ -81,34 +79,6 @@ def action_of_topic(topic: str) -> str | None:
     if topic.endswith(STATUS_TOPIC_SUFFIX) and len(topic) > len(STATUS_TOPIC_SUFFIX):
         return topic[: -len(STATUS_TOPIC_SUFFIX)]
     return None
-
-
-_CAMEL = re.compile(r"(?<=[a-z0-9])(?=[A-Z])")
-_NON_ALNUM = re.compile(r"[^A-Za-z0-9]+")
-UPPER_SNAKE = re.compile(r"[A-Z0-9]+(?:_[A-Z0-9]+)*")
-"""What ``upper_snake`` yields (and what a ``code_prefix`` must be)."""
-
-
-def upper_snake(action: str) -> str:
-    """``/robot1/arm/followJointTrajectory`` → ``ROBOT1_ARM_FOLLOW_JOINT_TRAJECTORY``."""
-    return _NON_ALNUM.sub("_", _CAMEL.sub("_", action)).strip("_").upper()
-
-
-def fault_code(prefix: str, action: str, suffix: str) -> str:
-    """``<prefix>_<ACTION>_<suffix>``, at most 64 characters.
-
-    The suffix (ABORTED/CANCELED) is always kept. A name that does not fit is cut and followed by
-    the first 6 hex digits of the sha1 of the full action name, so two long names that share
-    their beginning still get different codes. ``prefix`` is at most 32 characters (Settings).
-    """
-    name = upper_snake(action)
-    code = f"{prefix}_{name}_{suffix}"
-    if name and len(code) <= MAX_CODE_LENGTH:
-        return code
-    digest = hashlib.sha1(action.encode("utf-8")).hexdigest()[:HASH_LENGTH].upper()
-    room = MAX_CODE_LENGTH - len(prefix) - len(suffix) - len(digest) - 3  # three underscores
-    head = name[: max(room, 0)].rstrip("_")
-    return "_".join([prefix, head, digest, suffix] if head else [prefix, digest, suffix])
 
 
 def is_watched(action: str, exclude: Sequence[str], include_only: Sequence[str]) -> bool:
@@ -200,7 +170,7 @@ class ActionTracker:
         if verdict.net is Net.FAILED:
             out = []
             for suffix, failing in verdict.failing.items():
-                code = fault_code(self.rules.code_prefix, action, suffix)
+                code = fault_code(action, prefix=f"{self.rules.code_prefix}_", suffix=suffix)
                 if code not in state.raised:  # a new kind of failure is its own edge
                     state.raised.append(code)
                     out.append(Transition(code, False, self.rules.severity,

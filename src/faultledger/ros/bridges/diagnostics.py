@@ -14,7 +14,8 @@ from diagnostic_msgs.msg import DiagnosticArray  # type: ignore[import-untyped,u
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from faultledger.ros.bridges.diagnostics_mapping import EdgeTracker, Settings, Throttle
+from faultledger.ros.bridges.diagnostics_mapping import EdgeTracker, Settings
+from faultledger.ros.bridges.throttle import Throttle
 from faultledger.ros.guard import guard_callback
 from faultledger.ros.reporter import FaultReporter
 
@@ -30,7 +31,7 @@ class Bridge:
         self._node = node
         self._reporter = reporter
         log = node.get_logger()
-        self._warn = Throttle(log.warning, settings.warn_interval_sec)
+        self._warn = Throttle(log.warning, settings.warn_interval_sec).warn
         self._tracker = EdgeTracker(settings, node.get_fully_qualified_name(), self._warn)
         reliability = (ReliabilityPolicy.BEST_EFFORT if settings.reliability == "best_effort"
                        else ReliabilityPolicy.RELIABLE)

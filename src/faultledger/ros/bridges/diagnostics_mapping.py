@@ -9,10 +9,7 @@ reports only when a level changes. Kept free of rclpy so it can be unit-tested d
 
 from __future__ import annotations
 
-import hashlib
 import re
-import time
-import unicodedata
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -20,11 +17,8 @@ from typing import Any, Literal, Protocol
 
 from pydantic import BaseModel, Field, field_validator
 
-from faultledger.domain.validation import (
-    MAX_DESCRIPTION_LENGTH,
-    MAX_FAULT_CODE_LENGTH,
-    fault_code_error,
-)
+from faultledger.domain.validation import MAX_DESCRIPTION_LENGTH, fault_code_error
+from faultledger.ros.bridges.codes import fault_code, upper_snake
 
 # diagnostic_msgs/DiagnosticStatus level values (a ``byte`` field: rclpy gives ``bytes``).
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -32,15 +26,12 @@ LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
 
 MAX_PREFIX_LENGTH = 64
 """A prefix leaves at least 64 characters of the 128 for the part generated from the name."""
-HASH_LENGTH = 8
 MAX_TRACKED = 10_000
 """Statuses remembered as failing at once; beyond this the oldest is forgotten (with a warning),
 so a publisher inventing names cannot grow the bridge's memory without bound."""
 
 _TOPIC = re.compile(r"^~?/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$|^/$")
 _PREFIX = re.compile(r"^[A-Za-z0-9_.\-]*$")
-_CAMEL = re.compile(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])")
-_NON_ALNUM = re.compile(r"[^A-Za-z0-9]+")
 
 Severity = int
 
@@ -126,23 +117,6 @@ def level_of(raw: object) -> int | None:
     return value if value in LEVEL_NAMES else None
 
 
-def generate_code(name: str, prefix: str = "") -> str:
-    """Upper snake case of a status name: ``motor_driver: Temperature`` →
-    ``MOTOR_DRIVER_TEMPERATURE``; camelCase is split, accents dropped, every run of other
-    characters becomes one ``_``. ``""`` when the name has no letter or digit. Codes longer
-    than 128 characters are cut and end in ``_`` + 8 hex digits of the name's SHA-256, so two
-    long names stay distinct."""
-    ascii_name = unicodedata.normalize("NFKD", name).encode("ascii", "ignore").decode("ascii")
-    words = _NON_ALNUM.sub("_", _CAMEL.sub("_", ascii_name)).strip("_")
-    if not words:
-        return ""
-    code = prefix + words.upper()
-    if len(code) > MAX_FAULT_CODE_LENGTH:
-        digest = hashlib.sha256(name.encode("utf-8", "surrogatepass")).hexdigest()[:HASH_LENGTH]
-        code = code[: MAX_FAULT_CODE_LENGTH - HASH_LENGTH - 1].rstrip("_.-") + "_" + digest
-    return code
-
-
 def value_of(status: StatusLike, key: str) -> str | None:
     """The value of ``key`` in the status's key/value pairs (first match), else None."""
     for pair in status.values:
@@ -150,28 +124,6 @@ def value_of(status: StatusLike, key: str) -> str | None:
             value = getattr(pair, "value", "")
             return value if isinstance(value, str) else str(value)
     return None
-
-
-class Throttle:
-    """At most one message per category per ``interval`` seconds; counts what it held back."""
-
-    def __init__(self, emit: Callable[[str], None], interval: float,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self._emit = emit
-        self._interval = interval
-        self._clock = clock
-        self._last: dict[str, float] = {}
-        self._held: dict[str, int] = {}
-
-    def __call__(self, category: str, message: str) -> None:
-        now = self._clock()
-        last = self._last.get(category)
-        if last is not None and now - last < self._interval:
-            self._held[category] = self._held.get(category, 0) + 1
-            return
-        held = self._held.pop(category, 0)
-        self._last[category] = now
-        self._emit(message + (f" ({held} similar warnings suppressed)" if held else ""))
 
 
 @dataclass
@@ -192,7 +144,7 @@ class EdgeTracker:
     """
 
     def __init__(self, settings: Settings, bridge_source: str,
-                 warn: Callable[[str, str], None]) -> None:
+                 warn: Callable[[str, str], object]) -> None:
         self.settings = settings
         self.bridge_source = bridge_source
         self._warn = warn
@@ -235,13 +187,12 @@ class EdgeTracker:
                 self._warn("code_value", f"diagnostics: status {status.name!r}: "
                            f"{self.settings.code_key}={value[:200]!r} is not a valid fault code "
                            f"({problem}); using the code generated from the name")
-        code = generate_code(status.name, self.settings.code_prefix)
-        if not code:
+        if not upper_snake(status.name):
             self._warn("no_code", f"diagnostics: status name {status.name[:200]!r} has no "
                        "letter or digit to make a fault code of; status ignored (map it in "
                        "name_to_code)")
             return None
-        return code
+        return fault_code(status.name, prefix=self.settings.code_prefix)
 
     def source_for(self, status: StatusLike) -> str:
         if self.settings.source_from_hardware_id and status.hardware_id:

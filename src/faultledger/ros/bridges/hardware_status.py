@@ -9,7 +9,6 @@ is ``docs/bridges/hardware_status.md``.
 from __future__ import annotations
 
 import importlib
-import time
 from typing import Any
 
 from rclpy.node import Node
@@ -20,9 +19,9 @@ from faultledger.ros.bridges.hardware_status_mapping import (
     TOPIC_SUFFIX,
     HardwareStatusMapper,
     Settings,
-    Throttle,
     resolve_severities,
 )
+from faultledger.ros.bridges.throttle import Throttle
 from faultledger.ros.guard import guard_callback
 from faultledger.ros.reporter import FaultReporter
 
@@ -46,7 +45,7 @@ class Bridge:
         self._log = node.get_logger()
         self._reporter = reporter
         self._settings = settings
-        self._throttle = Throttle(self._log.warning, settings.warn_interval_sec, time.monotonic)
+        self._throttle = Throttle(self._log.warning, settings.warn_interval_sec)
         severities = resolve_severities(settings.severities, self._log.warning)
         self._mapper = HardwareStatusMapper(settings, severities)
         self._type_name, self._type = self._message_type(settings.message_type)

@@ -14,14 +14,13 @@ Messages are read by field name (``getattr``), never by type, so control_msgs' o
 
 from __future__ import annotations
 
-import hashlib
-import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from pydantic import BaseModel, Field
 
+from faultledger.ros.bridges.codes import fault_code
 from faultledger.ros.bridges.settings import normalise
 
 DEFAULT_MESSAGE_TYPE = "hardware_status_msgs/msg/HardwareStatus"
@@ -48,8 +47,6 @@ POWER_NAMES = ("UNKNOWN", "OFF", "STANDBY", "ON", "SLEEP", "ERROR", "LEVEL_LOW",
 CONNECT_NAMES = ("UNKNOWN", "UP", "DOWN", "FAILURE", "SLOW")
 AL_STATE_NAMES = {1: "INIT", 2: "PREOP", 3: "BOOTSTRAP", 4: "SAFEOP", 8: "OP"}
 
-MAX_CODE_LENGTH = 128
-HASH_LENGTH = 8
 MAX_DESCRIPTION = 1000
 """Descriptions are cut here (the ledger allows 4096): they are for humans, not for parsing."""
 
@@ -182,35 +179,6 @@ CONDITIONS: tuple[Condition, ...] = (
     *ERROR_DOMAIN_CONDITIONS.values(), HEALTH, *POWER_CONDITIONS.values(), CONNECTION_LOST,
     CONNECTION_SLOW_CONDITION, ETHERCAT_ERROR, CANOPEN_EMCY, CANOPEN_DRIVE_FAULT, VDA5050_ERROR)
 """Every condition, in the order of the documented table."""
-
-
-# -- codes -----------------------------------------------------------------------------------------
-_CAMEL = re.compile(r"(?<=[a-z0-9])(?=[A-Z])")
-_NON_ALNUM = re.compile(r"[^A-Za-z0-9]+")
-
-
-def upper_snake(name: str) -> str:
-    """``left_arm/wheelMotor-1`` → ``LEFT_ARM_WHEEL_MOTOR_1``; an id with no letter or digit
-    (``"/"``) becomes ``ID_<hash>`` so it still gets codes of its own."""
-    snake = _NON_ALNUM.sub("_", _CAMEL.sub("_", name)).strip("_").upper()
-    return snake or f"ID_{_hash(name)[:6]}"
-
-
-def _hash(text: str) -> str:
-    return hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest().upper()
-
-
-def fault_code(prefix: str, hardware_id: str, device_id: str, suffix: str) -> str:
-    """``<PREFIX>_<HW>_<DEVICE>_<SUFFIX>``, at most 128 characters: when longer, the hardware and
-    device part is cut and followed by a hash of the whole code, so long ids stay distinct and
-    the condition suffix stays readable."""
-    parts = [p for p in (prefix.upper(), upper_snake(hardware_id), upper_snake(device_id)) if p]
-    base = "_".join(parts)
-    code = f"{base}_{suffix}"
-    if len(code) <= MAX_CODE_LENGTH:
-        return code
-    keep = MAX_CODE_LENGTH - len(suffix) - HASH_LENGTH - 2
-    return f"{base[:keep].rstrip('_')}_{_hash(code)[:HASH_LENGTH]}_{suffix}"
 
 
 # -- reading messages by field name ---------------------------------------------------------------
@@ -442,6 +410,9 @@ class HardwareStatusMapper:
     def __init__(self, settings: Settings, severities: Severities) -> None:
         self.settings = settings
         self.severities = severities
+        prefix = settings.code_prefix.upper()
+        self._prefix = f"{prefix}_" if prefix else ""
+        """Codes are ``<PREFIX>_<HW>_<DEVICE>_<SUFFIX>`` (``codes.fault_code``)."""
         self._state: dict[str, dict[str, dict[str, _Held]]] = {}
         """hardware_id → device_id → suffix → held condition."""
 
@@ -497,34 +468,13 @@ class HardwareStatusMapper:
             previous = held.get(suffix)
             if previous is None or active.severity > previous.severity:
                 held[suffix] = _Held(obs.families[suffix], active.severity)
-                yield Transition(fault_code(self.settings.code_prefix, hardware_id, device_id,
-                                            suffix), True, active.severity,
+                yield Transition(fault_code(hardware_id, device_id, prefix=self._prefix,
+                                            suffix=suffix), True, active.severity,
                                  active.description[:MAX_DESCRIPTION], source, hardware_id,
                                  device_id, suffix)
         for suffix in [s for s, h in held.items()
                        if h.family in obs.evaluated and s not in obs.active]:
             del held[suffix]
-            yield Transition(fault_code(self.settings.code_prefix, hardware_id, device_id, suffix),
-                             False, 0, "", source, hardware_id, device_id, suffix)
-
-
-class Throttle:
-    """At most one warning per key per ``interval`` seconds (bounded: forgets after 1024 keys)."""
-
-    def __init__(self, emit: Callable[[str], None], interval: float,
-                 clock: Callable[[], float]) -> None:
-        self._emit = emit
-        self._interval = interval
-        self._clock = clock
-        self._last: dict[str, float] = {}
-
-    def warn(self, key: str, text: str) -> bool:
-        now = self._clock()
-        last = self._last.get(key)
-        if last is not None and now - last < self._interval:
-            return False
-        if len(self._last) >= 1024:
-            self._last.clear()
-        self._last[key] = now
-        self._emit(text)
-        return True
+            yield Transition(fault_code(hardware_id, device_id, prefix=self._prefix,
+                                        suffix=suffix), False, 0, "", source, hardware_id,
+                             device_id, suffix)

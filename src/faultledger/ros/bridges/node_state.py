@@ -24,8 +24,8 @@ from faultledger.ros.bridges.node_state_mapping import (
     NodeStateMonitor,
     Report,
     Severities,
-    Throttle,
 )
+from faultledger.ros.bridges.throttle import Throttle
 from faultledger.ros.guard import guard_callback
 
 if TYPE_CHECKING:
@@ -70,7 +70,7 @@ class Bridge:
             Severities(error=settings.error_severity, fatal=settings.fatal_severity,
                        warning=settings.warning_severity,
                        heartbeat_lost=settings.heartbeat_lost_severity))
-        self._throttle = Throttle(WARN_EVERY_SEC)
+        self._throttle = Throttle(self._log.warning, WARN_EVERY_SEC)
         self._subscription = node.create_subscription(
             node_state_type(), settings.topic,
             guard_callback(self._on_state, self._log, settings.topic), QOS)
@@ -96,11 +96,7 @@ class Bridge:
                 nodetype=message.nodetype, machine_message=message.machine_message,
                 human_message=message.human_message)
         except BadMessage as error:
-            suppressed = self._throttle.allow(now)
-            if suppressed is not None:
-                more = f" ({suppressed} more bad messages since the last warning)" \
-                    if suppressed else ""
-                self._log.warning(f"node_state: ignored {error}{more}")
+            self._throttle.warn("bad_message", f"node_state: ignored {error}")
             return
         self._apply(reports)
 

@@ -7,12 +7,11 @@ clock's reading at receipt and calls ``check`` periodically; both return the rep
 
 from __future__ import annotations
 
-import hashlib
-import re
 from dataclasses import dataclass, field
 from typing import Literal
 
-from faultledger.domain.validation import MAX_DESCRIPTION_LENGTH, MAX_FAULT_CODE_LENGTH
+from faultledger.domain.validation import MAX_DESCRIPTION_LENGTH
+from faultledger.ros.bridges.codes import fault_code, upper_snake
 
 # nodemon_msgs/msg/NodeState constants.
 STARTING, STOPPING, RUNNING, ERROR, RECOVERING, FATAL, WARNING = range(7)
@@ -25,12 +24,8 @@ SUFFIX_ERROR = "ERROR"
 SUFFIX_FATAL = "FATAL"
 SUFFIX_WARNING = "WARNING"
 SUFFIX_HEARTBEAT_LOST = "HEARTBEAT_LOST"
-_LONGEST_SUFFIX = len("_" + SUFFIX_HEARTBEAT_LOST)
-_PREFIX = "NODE_"
-_MAX_NAME = MAX_FAULT_CODE_LENGTH - len(_PREFIX) - _LONGEST_SUFFIX
-"""Longest <NAME> part: every code of a node shares the same one, whatever its suffix."""
-_HASH_LEN = 8
-_NOT_ALNUM = re.compile(r"[^A-Za-z0-9]+")
+CODE_PREFIX = "NODE_"
+"""Codes are ``NODE_<NAME>_<SUFFIX>``, ``<NAME>`` the node FQN by ``codes.fault_code``."""
 
 
 HEARTBEAT_TIMEOUT_SEC = 5.0
@@ -42,25 +37,6 @@ def heartbeat_lost(state: int | None, last_seen: float, now: float,
     """The one timeout rule: silent for longer than ``timeout_sec`` (steady clock, seconds)
     and its last state was not STOPPING (a clean exit is no loss)."""
     return state != STOPPING and now - last_seen > timeout_sec
-
-
-def code_name(nodename: str) -> str:
-    """``/robot1/lidar_driver`` → ``ROBOT1_LIDAR_DRIVER``; "" when nothing usable is left.
-
-    Runs of anything but ASCII letters and digits become one ``_``. A name too long for a
-    128-character code is cut and ends in ``_`` + 8 hex digits of its SHA-256, so two long
-    names that share a prefix still get different codes.
-    """
-    name = _NOT_ALNUM.sub("_", nodename).strip("_").upper()
-    if len(name) > _MAX_NAME:
-        digest = hashlib.sha256(nodename.encode("utf-8", "surrogatepass")).hexdigest()
-        name = f"{name[:_MAX_NAME - _HASH_LEN - 1].rstrip('_')}_{digest[:_HASH_LEN].upper()}"
-    return name
-
-
-def fault_code(nodename: str, suffix: str) -> str:
-    """``NODE_<NAME>_<SUFFIX>``, at most 128 characters."""
-    return f"{_PREFIX}{code_name(nodename)}_{suffix}"
 
 
 @dataclass(frozen=True)
@@ -137,7 +113,7 @@ class NodeStateMonitor:
         Raises BadMessage for a message that names no node or carries an unknown state; such a
         message changes nothing (it does not count as a heartbeat either).
         """
-        if not code_name(nodename):
+        if not upper_snake(nodename):
             raise BadMessage(f"NodeState with unusable nodename {nodename!r}")
         if state not in STATE_NAMES:
             raise BadMessage(f"NodeState from {nodename} with unknown state {state}")
@@ -189,28 +165,10 @@ class NodeStateMonitor:
     def _failed(self, node: NodeInfo, suffix: str, severity: int, description: str) -> Report:
         if suffix not in node.raised:
             node.raised.append(suffix)
-        return Report("failed", fault_code(node.nodename, suffix), node.nodename, severity,
-                      description)
+        return Report("failed", fault_code(node.nodename, prefix=CODE_PREFIX, suffix=suffix),
+                      node.nodename, severity, description)
 
     @staticmethod
     def _passed(node: NodeInfo, suffix: str) -> Report:
-        return Report("passed", fault_code(node.nodename, suffix), node.nodename)
-
-
-class Throttle:
-    """At most one warning per ``period_sec`` (steady clock); counts what it held back so the
-    next warning can say how many were suppressed."""
-
-    def __init__(self, period_sec: float = 10.0) -> None:
-        self.period_sec = period_sec
-        self.suppressed = 0
-        self._last: float | None = None
-
-    def allow(self, now: float) -> int | None:
-        """None: suppress this one. Otherwise the number suppressed since the last allowed."""
-        if self._last is not None and now - self._last < self.period_sec:
-            self.suppressed += 1
-            return None
-        self._last = now
-        count, self.suppressed = self.suppressed, 0
-        return count
+        return Report("passed", fault_code(node.nodename, prefix=CODE_PREFIX, suffix=suffix),
+                      node.nodename)
