@@ -17,6 +17,12 @@ class Reason(StrEnum):
     """Already recorded (an event_id, a goal outcome): accepted, nothing stored again."""
     UNAVAILABLE = "unavailable"
     """The database cannot serve now (locked, full, read-only, damaged, closed)."""
+    UNAUTHORIZED = "unauthorized"
+    """No valid credentials (HTTP: a missing or unknown bearer token)."""
+    FORBIDDEN = "forbidden"
+    """Valid credentials whose role does not allow this."""
+    TOO_LARGE = "too_large"
+    """A request body over the configured limit."""
     INTERNAL = "internal"
     """Something this code did not foresee; the message says what."""
 

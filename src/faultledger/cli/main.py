@@ -6,8 +6,6 @@ import getpass
 import json
 import os
 import sys
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as package_version
 from pathlib import Path
 from typing import Annotated
 
@@ -16,6 +14,7 @@ import typer
 from faultledger.cli import anchor as anchor_commands
 from faultledger.cli import audit, render
 from faultledger.cli import stats as stats_commands
+from faultledger.cli import web as web_commands
 from faultledger.cli.options import (
     TIME_HELP,
     ConfigOption,
@@ -37,6 +36,7 @@ from faultledger.domain.types import FaultStatus, Severity
 from faultledger.errors import FaultLedgerError
 from faultledger.store import migrate
 from faultledger.store.database import Database, describe
+from faultledger.version import version
 
 app = typer.Typer(
     help="Event-sourced fault manager: durable fault log, DEM debounce, audit history.",
@@ -50,16 +50,9 @@ app.add_typer(db_app, name="db")
 STATUSES = ", ".join(s.value for s in FaultStatus)
 
 
-def _version() -> str:
-    try:
-        return package_version("faultledger")
-    except PackageNotFoundError:  # a source tree that was never installed
-        return "unknown"
-
-
 def _print_version(value: bool) -> None:
     if value:
-        typer.echo(f"faultledger {_version()}")
+        typer.echo(f"faultledger {version()}")
         raise typer.Exit(0)
 
 
@@ -218,6 +211,7 @@ audit.register(app)
 stats_commands.register(app)
 # anchor (export, keygen): signed anchors of the log head, in cli/anchor.py.
 anchor_commands.register(app)
+web_commands.register(app)
 
 
 @app.command()

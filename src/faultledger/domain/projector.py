@@ -62,6 +62,9 @@ class Projector:
         self.policy_recorded = policy_recorded
         self.policy_seq = policy_seq
         self.seq = seq
+        self.committed_seq = seq
+        """``seq`` as readers may see it: staged records are not included until ``commit``,
+        which sets it after the faults, so a reader that sees a seq sees its faults."""
 
     # -- reading -----------------------------------------------------------------------------
     def get(self, fault_code: str) -> Fault | None:
@@ -116,6 +119,7 @@ class Projector:
             self._faults.update(self._staged)
         self._staged = None
         self._saved = None
+        self.committed_seq = self.seq
 
     def rollback(self) -> None:
         if self.stats is not None:
@@ -145,6 +149,8 @@ class Projector:
         if record.seq != self.seq + 1:
             raise ValueError(f"record seq {record.seq} does not follow {self.seq}")
         self.seq = record.seq
+        if self._saved is None:
+            self.committed_seq = record.seq
         event = record.event
         effect = self._apply(record, event)
         if self.stats is not None:
@@ -154,6 +160,14 @@ class Projector:
                 fault = effect.fault or self.get(event.fault_code)
                 self.stats.observe(record, effect.transition, fault)
         return effect
+
+    def apply_selected(self, record: LogRecord) -> Effect:
+        """Apply a record of a selection of the log: some faults' records plus every policy
+        change. Faults never affect one another, so those faults end as in a full replay."""
+        if record.seq <= self.seq:
+            raise ValueError(f"record seq {record.seq} does not follow {self.seq}")
+        self.seq = record.seq - 1
+        return self.apply(record)
 
     def _apply(self, record: LogRecord, event: DomainEvent) -> Effect:
         if isinstance(event, FaultReported):

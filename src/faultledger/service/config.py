@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -42,6 +42,36 @@ class AnchorSettings(BaseModel):
     """Newest anchor files `serve` keeps in ``directory``; None: all."""
 
 
+class TokenEntry(BaseModel):
+    """One HTTP bearer token: only its SHA-256 is stored (``faultledger token create``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.@-]+$")
+    """Who holds it: recorded as the actor of every change made with it."""
+    role: Literal["viewer", "reporter", "operator", "admin"]
+    sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
+
+
+class HttpSettings(BaseModel):
+    """The HTTP adapter (docs/http.md): `faultledger http` and `faultledger serve --http`."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    listen: str = "127.0.0.1:8080"
+    """[HOST:]PORT; the command line's --listen / --http wins."""
+    tokens: list[TokenEntry] = Field(default_factory=list)
+    tokens_file: Path | None = Path("var/http-tokens.yaml")
+    """Where `faultledger token create` adds tokens; read at start when it exists."""
+    cors_origins: list[str] = Field(default_factory=list)
+    """Origins allowed to call the API from a browser; empty: none (CORS closed)."""
+    max_body_bytes: int = Field(default=1024 * 1024, ge=1024, le=64 * 1024 * 1024)
+    max_reports_per_request: int = Field(default=1000, ge=1, le=100_000)
+    stream_buffer: int = Field(default=10_000, ge=100, le=1_000_000)
+    """Notifications kept for stream clients; a client further behind is disconnected and
+    resumes from the log with Last-Event-ID."""
+
+
 class Settings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -54,21 +84,23 @@ class Settings(BaseModel):
     """Shift calendar YAML (see config/shifts.yaml) for statistics, relative to the working
     directory; None: the built-in default calendar (UTC, three 8-hour shifts)."""
     anchors: AnchorSettings = Field(default_factory=AnchorSettings)
+    http: HttpSettings = Field(default_factory=HttpSettings)
 
 
 def load_settings(path: Path | None) -> Settings:
     """Settings from a YAML file, or the built-in defaults when no file is given."""
     if path is None:
         return Settings()
-    return _load(path, Settings, "config file")
+    return load_model(path, Settings, "config file")
 
 
 def load_shift_calendar(path: Path) -> ShiftCalendar:
     """``config/shifts.yaml``: refused as a whole, with located messages, when invalid."""
-    return _load(path, ShiftCalendar, "shift calendar")
+    return load_model(path, ShiftCalendar, "shift calendar")
 
 
-def _load(path: Path, model: type[M], what: str) -> M:
+def load_model(path: Path, model: type[M], what: str) -> M:
+    """A YAML file validated into ``model``; every problem is one ``ConfigError`` line."""
     try:
         with path.open("rb") as file:
             raw = file.read(MAX_CONFIG_BYTES + 1)

@@ -66,6 +66,8 @@ from faultledger.store.database import Database, describe
 log = logging.getLogger(__name__)
 
 Callback = Callable[[Notification], None]
+_SELECTIVE_REPLAY_CODES = 500
+"""A catch-up touching more fault codes than this replays the whole log instead."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -167,7 +169,8 @@ class FaultLedger:
 
     @property
     def last_seq(self) -> int:
-        return self._writer.projector.seq
+        """The newest record whose effects readers see (not one still being committed)."""
+        return self._writer.projector.committed_seq
 
     # -- writes ----------------------------------------------------------------------------------
     def report(self, fault_code: str, event_type: str | int, severity: int = 0,
@@ -391,6 +394,35 @@ class FaultLedger:
                             first_bad, problems)
 
     # -- notifications ---------------------------------------------------------------------------
+    def notifications_after(self, seq: int, limit: int = 1000) -> list[Notification]:
+        """The announcements of the records after ``seq``, as subscribers received them (at
+        most ``limit``, in seq order), derived from the log: how a stream client that was
+        away (or a restarted server) catches up with nothing missed and nothing twice.
+
+        Only the faults those records touch are replayed, unless there are very many.
+        """
+        seq = _seq(seq, "seq")
+        _check_limit(limit)
+        found: list[Notification] = []
+        with self._db.reading() as conn:
+            codes = event_log.codes_after(conn, seq, _SELECTIVE_REPLAY_CODES)
+            projector = Projector()
+            if codes is None:
+                records = event_log.read(conn)
+                apply = projector.apply
+            else:
+                records = event_log.read_of_codes(conn, codes)
+                apply = projector.apply_selected
+            for record in records:
+                effect = apply(record)
+                if (record.seq > seq and effect.notification is not None
+                        and effect.fault is not None):
+                    found.append(Notification(effect.notification, effect.fault,
+                                              record.recorded_at_ns, record.seq))
+                    if len(found) >= limit:
+                        break
+        return found
+
     def subscribe(self, callback: Callback) -> Subscription:
         """Call ``callback(notification)`` after each announced change is durable.
 
@@ -746,7 +778,8 @@ def _check_limit(limit: int | None) -> None:
 
 
 def _seq(value: int, name: str) -> int:
-    if isinstance(value, bool) or not 0 <= value <= validation.MAX_INTEGER:
+    if (isinstance(value, bool) or not isinstance(value, int)
+            or not 0 <= value <= validation.MAX_INTEGER):
         raise InvalidInputError(f"{name} must be a seq number of 0 or more, got "
                                 f"{validation.shown(value)}")
     return value

@@ -359,7 +359,7 @@ class Writer:
                         or self._connection.others_committed(conn)
                         or any(isinstance(p.command, CatchUp) for p in group)):
                     self._head = event_log.head(conn)
-                    self._catch_up(conn, self._head[0])
+                    self._catch_up(conn, self._head[0], batch)
                 ids = [p.command.event_id for p in group
                        if (isinstance(p.command, Report) and p.command.explicit_id)
                        or isinstance(p.command, RecordGoal)]
@@ -392,8 +392,12 @@ class Writer:
                 pending.error = error
             pending.done = True
 
-    def _catch_up(self, conn: Connection, stored_seq: int) -> None:
-        """Apply records another process appended; it saved their projections already."""
+    def _catch_up(self, conn: Connection, stored_seq: int, batch: _Batch) -> None:
+        """Apply records another process appended; it saved their projections already.
+
+        Their announcements go out with this group's, after its commit, so subscribers (the
+        ROS events topic, HTTP streams) also see what other processes wrote, in seq order.
+        """
         projector = self.projector
         if stored_seq == projector.seq:
             return
@@ -402,7 +406,11 @@ class Writer:
                 f"the log ends at seq {stored_seq} but this process has applied {projector.seq}: "
                 "the database was replaced or truncated underneath; restart faultledger"
             )
-        projector.apply_all(event_log.read(conn, after_seq=projector.seq))
+        for record in event_log.read(conn, after_seq=projector.seq):
+            effect = projector.apply(record)
+            if effect.notification is not None and effect.fault is not None:
+                batch.notifications.append(Notification(
+                    effect.notification, effect.fault, record.recorded_at_ns, record.seq))
         if projector.stats is not None:
             projector.stats.take()  # the other process saved these too
 

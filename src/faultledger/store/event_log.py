@@ -10,7 +10,13 @@ from typing import Any, NamedTuple
 
 from sqlalchemy import Connection, Integer, Select, bindparam, func, select
 
-from faultledger.domain.events import LogRecord, PolicyChanged, UnknownRecordError, decode
+from faultledger.domain.events import (
+    POLICY_CHANGED,
+    LogRecord,
+    PolicyChanged,
+    UnknownRecordError,
+    decode,
+)
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
 from faultledger.store import fastpath
 from faultledger.store.schema import events
@@ -347,3 +353,22 @@ def _missing(conn: Connection, seq: int, last_needed: int) -> tuple[int, str]:
                               "that the range needs: records were deleted or never written")
     return seq, (f"record {seq} is missing (next stored record is {following}): records were "
                  "deleted or renumbered")
+
+
+def codes_after(conn: Connection, seq: int, most: int) -> list[str] | None:
+    """Fault codes of the records after ``seq``; None when there are more than ``most``."""
+    query = (select(events.c.fault_code).where(events.c.seq > seq,
+                                               events.c.fault_code.is_not(None))
+             .distinct().limit(most + 1))
+    codes = [row[0] for row in conn.execute(query)]
+    return None if len(codes) > most else codes
+
+
+def read_of_codes(conn: Connection, codes: Sequence[str]) -> Iterator[LogRecord]:
+    """Every record of these fault codes plus every policy change, in seq order: all a
+    replay of just these faults needs (faults do not affect one another)."""
+    query = (select(events).where(events.c.fault_code.in_(list(codes))
+                                  | (events.c.kind == POLICY_CHANGED))
+             .order_by(events.c.seq))
+    for row in _stream(conn, query):
+        yield _to_record(row)

@@ -1,0 +1,56 @@
+"""The FastAPI application over one open ``FaultLedger`` (SPEC §10, docs/http.md).
+
+The adapter only translates: parameters to service calls, results and errors to JSON. Every
+rule lives in the service and domain layers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+
+from faultledger.domain.shifts import ShiftCalendar
+from faultledger.http import errors, medkit
+from faultledger.http.auth import Authorizer, BodyLimit
+from faultledger.http.context import Context
+from faultledger.http.stream import StreamHub
+from faultledger.service.config import HttpSettings
+from faultledger.service.ledger import FaultLedger
+from faultledger.service.tokens import TokenBook
+from faultledger.version import version
+
+DESCRIPTION = (
+    "Fault manager HTTP API: ros2_medkit gateway fault endpoints (a medkit client works "
+    "unchanged), plus the audit history, time travel, per-shift statistics, reports for "
+    "sources without ROS, a resumable event stream and Prometheus metrics."
+)
+
+
+def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalendar,
+               tokens: TokenBook, *, read_only: bool = False) -> FastAPI:
+    hub = StreamHub(ledger, medkit.stream_data, settings.stream_buffer)
+    context = Context(ledger, settings, calendar, Authorizer(tokens), hub, read_only)
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        hub.start()
+        try:
+            yield
+        finally:
+            hub.stop()
+
+    app = FastAPI(title="faultledger", version=version(), description=DESCRIPTION,
+                  lifespan=lifespan)
+    app.state.context = context
+    errors.install(app)
+    from faultledger.http.routes import register  # the routes import the app's modules
+    register(app, context)
+    if settings.cors_origins:
+        app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
+                           allow_methods=["GET", "POST", "DELETE"],
+                           allow_headers=["Authorization", "Content-Type", "Last-Event-ID"])
+    app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    return app

@@ -1,0 +1,14 @@
+"""The API's routes, one module per concern; ``register`` mounts them all."""
+
+from __future__ import annotations
+
+from fastapi import FastAPI
+
+from faultledger.http.context import Context
+
+
+def register(app: FastAPI, context: Context) -> None:
+    from faultledger.http.routes import faults, system
+
+    for module in (faults, system):
+        app.include_router(module.router(context))

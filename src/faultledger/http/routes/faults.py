@@ -1,0 +1,185 @@
+"""The ros2_medkit gateway's fault routes (docs/http.md, "medkit mapping"), plus a global
+single-fault route the gateway lacks and a stream that resumes from the log."""
+
+from __future__ import annotations
+
+import json
+import threading
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from sse_starlette import EventSourceResponse, ServerSentEvent
+
+from faultledger.domain.fault import Fault
+from faultledger.domain.types import FaultStatus
+from faultledger.errors import Reason
+from faultledger.http import medkit
+from faultledger.http.context import Context
+from faultledger.http.errors import ApiError
+from faultledger.service.tokens import Permission, Principal
+
+KEEPALIVE_SEC = 30
+"""A ``:keepalive`` comment after this long without events, as the gateway does."""
+ENTITY_TYPES = ("apps", "components", "areas", "functions")
+StatusQuery = Annotated[str | None, Query(
+    description="pending, confirmed, cleared (CLEARED+HEALED+PREPASSED), healed "
+    "(HEALED+PREPASSED) or all; none: PREFAILED and CONFIRMED")]
+
+
+def statuses(status: str | None) -> tuple[FaultStatus, ...]:
+    if status is None:
+        return medkit.DEFAULT_STATUSES
+    found = medkit.STATUS_GROUPS.get(status)
+    if found is None:
+        raise ApiError(Reason.INVALID, "Invalid status parameter value",
+                       parameters={"allowed_values": medkit.ALLOWED_STATUS_VALUES,
+                                   "parameter": "status", "value": status})
+    return found
+
+
+def writable(context: Context) -> None:
+    if context.read_only:
+        raise ApiError(Reason.UNAVAILABLE, "this server is read-only (a follower); clear and "
+                       "report through the fault manager that writes the database")
+
+
+def not_found(code: str) -> ApiError:
+    return ApiError(Reason.NOT_FOUND, f"Fault not found: {code}",
+                    parameters={"fault_code": code})
+
+
+def last_event_id(value: str | None) -> int | None:
+    if value is None or value.strip() == "":
+        return None
+    text = value.strip()
+    if not text.isdigit() or len(text) > 19:
+        raise ApiError(Reason.INVALID, f"Last-Event-ID must be the seq of an event received "
+                       f"(digits), got {value[:40]!r}")
+    return int(text)
+
+
+class ListCache:
+    """The encoded list per status group, valid while the log's head seq stays the same:
+    every change of a fault is a record, so an unchanged seq means unchanged faults. A busy
+    dashboard or monitoring poll then costs a dictionary look-up, not 10,000 encodings."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._seq = -1
+        self._content: dict[tuple[FaultStatus, ...], bytes] = {}
+
+    def get(self, seq: int, wanted: tuple[FaultStatus, ...]) -> bytes | None:
+        with self._lock:
+            return self._content.get(wanted) if seq == self._seq else None
+
+    def put(self, seq: int, wanted: tuple[FaultStatus, ...], content: bytes) -> None:
+        with self._lock:
+            if seq != self._seq:
+                self._seq, self._content = seq, {}
+            self._content[wanted] = content
+
+
+def _keepalive() -> ServerSentEvent:
+    return ServerSentEvent(comment="keepalive")
+
+
+def router(context: Context) -> APIRouter:
+    api = APIRouter(prefix="/api/v1", tags=["faults (ros2_medkit gateway)"])
+    ledger = context.ledger
+    read = Depends(context.auth.need(Permission.READ))
+    clear_permission = Depends(context.auth.need(Permission.CLEAR))
+
+    @api.get("/faults/stream", summary="Live fault events (SSE); id = log seq, resumable with "
+             "Last-Event-ID", response_class=EventSourceResponse)
+    async def stream(request: Request, _: Principal = read,
+                     last_event: Annotated[str | None, Header(alias="Last-Event-ID")] = None,
+                     ) -> EventSourceResponse:
+        after = last_event_id(last_event or request.query_params.get("last_event_id"))
+        return EventSourceResponse(context.hub.events(after), ping=KEEPALIVE_SEC,
+                                   ping_message_factory=_keepalive, send_timeout=30,
+                                   headers={"X-Accel-Buffering": "no"})
+
+    cache = ListCache()
+
+    @api.get("/faults", summary="Faults by medkit status group",
+             response_model=None, responses={200: {"content": {"application/json": {}}}})
+    def list_faults(request: Request, status: StatusQuery = None, include_muted: bool = False,
+                    include_clusters: bool = False, _: Principal = read) -> Response:
+        wanted = statuses(status)
+        seq = ledger.last_seq
+        etag = f'"{seq}-{status or "default"}"'
+        if request.headers.get("if-none-match") == etag:
+            return Response(status_code=304, headers={"ETag": etag})
+        content = cache.get(seq, wanted)
+        if content is None:
+            content = json.dumps(medkit.fault_list(
+                [f for f in ledger.all_faults() if f.status in wanted]),
+                separators=(",", ":")).encode()
+            cache.put(seq, wanted, content)
+        return Response(content, media_type="application/json", headers={"ETag": etag})
+
+    @api.get("/faults/{fault_code}", summary="One fault in any status (SOVD shape)")
+    def get_fault(fault_code: str, _: Principal = read) -> dict[str, Any]:
+        found = ledger.lookup_fault(fault_code)
+        if found.fault is None:
+            if found.reason == Reason.NOT_FOUND:
+                raise not_found(fault_code)
+            raise ApiError(found.reason or Reason.INVALID, found.message)
+        return medkit.fault_detail(found.fault)
+
+    @api.delete("/faults/{fault_code}", status_code=204, summary="Clear one fault")
+    def clear_fault(fault_code: str, reason: str = "",
+                    principal: Principal = clear_permission) -> Response:
+        writable(context)
+        result = ledger.clear(fault_code, actor=principal.name, reason=reason)
+        if not result.success:
+            if result.reason == Reason.NOT_FOUND:
+                raise not_found(fault_code)
+            raise ApiError(result.reason, result.message)
+        return Response(status_code=204)
+
+    @api.delete("/faults", status_code=204, summary="Clear every fault of a status group")
+    def clear_faults(status: StatusQuery = None, reason: str = "",
+                     principal: Principal = clear_permission) -> Response:
+        writable(context)
+        wanted = statuses(status)
+        for fault in ledger.all_faults():
+            if fault.status in wanted and fault.status is not FaultStatus.CLEARED:
+                result = ledger.clear(fault.fault_code, actor=principal.name, reason=reason)
+                if not result.success and result.reason != Reason.NOT_FOUND:
+                    raise ApiError(result.reason, result.message)
+        return Response(status_code=204, headers={"X-Medkit-Local-Only": "true"})
+
+    for kind in ENTITY_TYPES:
+        _entity_routes(api, context, kind, read)
+    return api
+
+
+def _entity_routes(api: APIRouter, context: Context, kind: str, read: Any) -> None:
+    """``/{apps,components,areas,functions}/{id}/faults[/{code}]``: the faults an entity
+    reported (every reporting source of the fault is that entity or below it)."""
+    ledger = context.ledger
+
+    def in_scope(entity_id: str) -> list[Fault]:
+        found = ledger.lookup_entity(entity_id)
+        if not found.success:
+            raise ApiError(found.reason or Reason.INVALID, found.message,
+                           parameters={"entity_id": entity_id})
+        return found.faults
+
+    @api.get(f"/{kind}/{{entity_id}}/faults", summary=f"Faults of one of the {kind}")
+    def entity_faults(entity_id: str, status: StatusQuery = None, _: Principal = read
+                      ) -> dict[str, Any]:
+        wanted = statuses(status)
+        faults = [f for f in in_scope(entity_id) if f.status in wanted]
+        answer = medkit.fault_list(faults)
+        answer["x-medkit"]["entity_id"] = entity_id
+        return answer
+
+    @api.get(f"/{kind}/{{entity_id}}/faults/{{fault_code}}",
+             summary=f"One fault of one of the {kind}")
+    def entity_fault(entity_id: str, fault_code: str, _: Principal = read) -> dict[str, Any]:
+        for fault in in_scope(entity_id):
+            if fault.fault_code == fault_code:
+                return medkit.fault_detail(fault)
+        raise not_found(fault_code)

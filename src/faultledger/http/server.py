@@ -1,0 +1,114 @@
+"""Running the HTTP adapter: `faultledger http` (alone) and `faultledger serve --http` (beside
+the ROS node, over the same ledger: one writer per process).
+
+Binds 127.0.0.1 unless told otherwise; any other address needs tokens (docs/http.md, "Auth").
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import socket
+import threading
+import time
+
+import uvicorn
+
+from faultledger.domain.shifts import ShiftCalendar
+from faultledger.errors import ConfigError
+from faultledger.http.app import create_app
+from faultledger.service.config import HttpSettings
+from faultledger.service.ledger import FaultLedger
+from faultledger.service.tokens import TokenBook, configured
+
+log = logging.getLogger(__name__)
+START_TIMEOUT_SEC = 10.0
+
+
+def parse_listen(text: str) -> tuple[str, int]:
+    """``[HOST:]PORT`` (``8080``, ``127.0.0.1:8080``, ``[::1]:8080``, ``0.0.0.0:80``)."""
+    value = text.strip()
+    host, _, port_text = value.rpartition(":")
+    host = host.strip("[]") or "127.0.0.1"
+    if not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
+        raise ConfigError(f"listen address must be [HOST:]PORT with a port 0..65535 "
+                          f"(e.g. 8080 or 127.0.0.1:8080), got {value!r}")
+    return host, int(port_text)
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def check_exposure(host: str, tokens: TokenBook) -> None:
+    """Bound to anything but loopback, the server refuses to start without tokens."""
+    if not is_loopback(host) and not tokens:
+        raise ConfigError(
+            f"refusing to listen on {host} without tokens: anyone on that network could "
+            "read and clear faults. Create one (faultledger token create --name NAME --role "
+            "ROLE) or listen on 127.0.0.1")
+
+
+class HttpServer:
+    """uvicorn over an open ledger, in the foreground (``run``) or a thread (``start``)."""
+
+    def __init__(self, ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalendar,
+                 listen: str | None = None, *, read_only: bool = False) -> None:
+        self.host, self.port = parse_listen(listen or settings.listen)
+        tokens = TokenBook(configured(settings))
+        check_exposure(self.host, tokens)
+        self.tokens = tokens
+        self.app = create_app(ledger, settings, calendar, tokens, read_only=read_only)
+        self._socket = _bind(self.host, self.port)
+        self.port = self._socket.getsockname()[1]
+        config = uvicorn.Config(self.app, log_level="warning", access_log=False,
+                                timeout_graceful_shutdown=2, lifespan="on")
+        self.server = uvicorn.Server(config)
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/"
+
+    def run(self) -> None:
+        """Serve in this thread until SIGINT/SIGTERM (uvicorn's own handlers)."""
+        self.server.run(sockets=[self._socket])
+
+    def start(self) -> None:
+        """Serve in a background thread; returns once it accepts connections."""
+        self._thread = threading.Thread(target=self.server.run,
+                                        kwargs={"sockets": [self._socket]},
+                                        name="faultledger-http", daemon=True)
+        self._thread.start()
+        deadline = time.monotonic() + START_TIMEOUT_SEC
+        while not self.server.started:
+            if not self._thread.is_alive() or time.monotonic() > deadline:
+                raise ConfigError(f"the HTTP server on {self.url} did not start")
+            time.sleep(0.02)
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self._socket.close()
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """The listening socket, bound before uvicorn starts so a taken port is a clear error."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as error:
+        sock.close()
+        raise ConfigError(f"cannot listen on {host}:{port}: {error.strerror or error}") from None
+    sock.listen(2048)
+    sock.set_inheritable(True)
+    return sock

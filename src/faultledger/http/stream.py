@@ -1,0 +1,183 @@
+"""The live notification stream behind ``GET /api/v1/faults/stream`` (docs/http.md, "Stream").
+
+One hub per server subscribes to the ledger once. The writer's callback only appends the
+notification to a shared, bounded buffer and wakes the event loop, so no number of stream
+clients, fast or stalled, ever slows a report. Each client reads the buffer with its own cursor
+and encodes nothing itself: every notification is encoded once, on first use.
+
+A client whose cursor falls off the buffer (it stalled for more than ``capacity``
+notifications) is disconnected; it reconnects with ``Last-Event-ID`` and catches up from the
+log, like a client that was away or a server that restarted. Event ids are log seqs, so the
+catch-up sends every notification after that id exactly once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import threading
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+
+from faultledger.domain.notifications import Notification
+from faultledger.service.ledger import FaultLedger, Subscription
+
+Encoder = Callable[[Notification], dict[str, object]]
+
+DEFAULT_CAPACITY = 10_000
+CATCH_UP_PAGE = 1_000
+"""Notifications derived from the log per read while a client catches up."""
+COALESCE_SEC = 0.01
+"""After a wake-up a client waits this long, then sends everything new in one write: under
+a burst, one send per client per 10 ms instead of one per notification."""
+
+
+@dataclass(slots=True)
+class _Item:
+    notification: Notification
+    frame: bytes | None = None
+
+
+@dataclass(slots=True)
+class _Buffer:
+    items: list[_Item] = field(default_factory=list)
+    base: int = 0
+    """Absolute index of items[0]: cursors stay valid while old items are dropped."""
+    covered_after: int = 0
+    """Every notification with a seq above this one is in the buffer (or was dropped from it,
+    which moves this mark up)."""
+
+
+class StreamHub:
+    """Fans the ledger's notifications out to any number of SSE clients."""
+
+    def __init__(self, ledger: FaultLedger, encode: Encoder,
+                 capacity: int = DEFAULT_CAPACITY) -> None:
+        self._ledger = ledger
+        self._encode = encode
+        self._capacity = capacity
+        self._lock = threading.Lock()
+        self._buffer = _Buffer()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._changed: asyncio.Event | None = None
+        self._wake_pending = False
+        self._subscription: Subscription | None = None
+        self._stopped = False
+        self.clients = 0
+        self.dropped_clients = 0
+
+    # -- lifecycle (on the server's event loop) ---------------------------------------------
+    def start(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._changed = asyncio.Event()
+        self._subscription = self._ledger.subscribe(self._on_notification)
+        with self._lock:
+            self._buffer.covered_after = self._ledger.last_seq
+
+    def stop(self) -> None:
+        self._stopped = True
+        if self._subscription is not None:
+            self._subscription.cancel()
+            self._subscription = None
+        if self._changed is not None:
+            self._changed.set()
+
+    # -- writer side (any thread) -----------------------------------------------------------
+    def _on_notification(self, notification: Notification) -> None:
+        buffer = self._buffer
+        with self._lock:
+            buffer.items.append(_Item(notification))
+            if len(buffer.items) > 2 * self._capacity:
+                cut = len(buffer.items) - self._capacity
+                buffer.covered_after = buffer.items[cut - 1].notification.seq
+                del buffer.items[:cut]
+                buffer.base += cut
+            if self._wake_pending or self._loop is None:
+                return
+            self._wake_pending = True
+        with contextlib.suppress(RuntimeError):  # a closed loop: the server is stopping
+            self._loop.call_soon_threadsafe(self._wake)
+
+    def _wake(self) -> None:
+        with self._lock:
+            self._wake_pending = False
+        assert self._changed is not None
+        self._changed.set()
+        self._changed = asyncio.Event()
+
+    # -- client side (event loop) -----------------------------------------------------------
+    def frame(self, item: _Item) -> bytes:
+        if item.frame is None:
+            notification = item.notification
+            data = json.dumps(self._encode(notification), separators=(",", ":"))
+            item.frame = (f"id: {notification.seq}\nevent: {notification.event_type.value}\n"
+                          f"data: {data}\n\n").encode()
+        return item.frame
+
+    async def events(self, after: int | None) -> AsyncIterator[bytes]:
+        """SSE bytes for one client: the notifications after seq ``after`` (None: from now),
+        then live ones, each exactly once and in seq order. Keep-alive comments and noticing
+        a closed connection are the response's job (sse-starlette)."""
+        self.clients += 1
+        try:
+            sent = self._ledger.last_seq if after is None else after
+            async for chunk in self._follow(sent):
+                yield chunk
+        finally:
+            self.clients -= 1
+
+    async def _follow(self, sent: int) -> AsyncIterator[bytes]:
+        loop = asyncio.get_running_loop()
+        cursor: int | None = None
+        while not self._stopped:
+            if cursor is None:
+                with self._lock:
+                    covered = self._buffer.covered_after
+                if sent < covered:
+                    # Catching up from the log: the buffer does not reach back that far.
+                    head = self._ledger.last_seq
+                    page = await loop.run_in_executor(
+                        None, self._ledger.notifications_after, sent, CATCH_UP_PAGE)
+                    if page:
+                        yield b"".join(self.frame(_Item(n)) for n in page)
+                        sent = page[-1].seq
+                    if len(page) < CATCH_UP_PAGE:
+                        sent = max(sent, head)
+                    continue
+                cursor = self._index_after(sent)
+            changed = self._changed
+            frames, cursor, sent, fell_behind = self._take(cursor, sent)
+            if fell_behind:
+                self.dropped_clients += 1
+                return
+            if frames:
+                yield frames
+                continue
+            assert changed is not None
+            await changed.wait()
+            await asyncio.sleep(COALESCE_SEC)
+
+    def _index_after(self, sent: int) -> int:
+        """Absolute index of the first buffered notification with a seq above ``sent``."""
+        with self._lock:
+            items, base = self._buffer.items, self._buffer.base
+            low, high = 0, len(items)
+            while low < high:
+                middle = (low + high) // 2
+                if items[middle].notification.seq <= sent:
+                    low = middle + 1
+                else:
+                    high = middle
+            return base + low
+
+    def _take(self, cursor: int, sent: int) -> tuple[bytes, int, int, bool]:
+        with self._lock:
+            buffer = self._buffer
+            if cursor < buffer.base:
+                return b"", cursor, sent, True
+            ready = buffer.items[cursor - buffer.base:]
+        frames = [self.frame(item) for item in ready if item.notification.seq > sent]
+        if ready:
+            sent = max(sent, ready[-1].notification.seq)
+        return b"".join(frames), cursor + len(ready), sent, False
