@@ -7,15 +7,14 @@ stderr and exit 2; a failed check is exit 1.
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterator
 from datetime import UTC
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any, TextIO
+from typing import Annotated, Any
 
 import typer
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
@@ -47,6 +46,7 @@ from faultledger.service.anchors import (
     with_anchors,
 )
 from faultledger.service.config import load_settings
+from faultledger.service.exports import Writer, write_csv, write_jsonl
 from faultledger.service.ledger import (
     FaultLedger,
     export_history,
@@ -65,10 +65,6 @@ class Format(StrEnum):
     jsonl = "jsonl"
 
 
-EXPORT_COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "occurred_at",
-                  "occurred_at_ns", "recorded_at", "recorded_at_ns", "schema_version",
-                  "payload", "prev_hash", "hash")
-"""Export columns, in order (docs/operations.md, "Export formats")."""
 
 
 def register(app: typer.Typer) -> None:
@@ -135,7 +131,7 @@ def history(
             out.print(render.history_table(records, render.fit_width(out, wide)))
             return
         rows = export_history(ledger, **filters)
-        writer = _write_csv if chosen is Format.csv else _write_jsonl
+        writer = write_csv if chosen is Format.csv else write_jsonl
         count = _export(rows, writer, output, force)
     if output is not None:
         render.console(stderr=True).print(cell(f"wrote {count} records to {output}"))
@@ -257,50 +253,6 @@ def state_at(
 
 
 # -- export ----------------------------------------------------------------------------------
-
-def export_row(record: StoredRecord) -> dict[str, Any]:
-    """One record as an export object; ``payload`` is the stored canonical JSON, parsed."""
-    return {
-        "seq": record.seq,
-        "event_id": record.event_id,
-        "kind": record.kind,
-        "fault_code": record.fault_code,
-        "source_id": record.source_id,
-        "occurred_at": iso_ns(record.occurred_at_ns),
-        "occurred_at_ns": record.occurred_at_ns,
-        "recorded_at": iso_ns(record.recorded_at_ns),
-        "recorded_at_ns": record.recorded_at_ns,
-        "schema_version": record.schema_version,
-        "payload": json.loads(record.payload_json),
-        "prev_hash": record.prev_hash,
-        "hash": record.hash,
-    }
-
-
-Writer = Callable[[Iterable[StoredRecord], TextIO], int]
-
-
-def _write_jsonl(rows: Iterable[StoredRecord], out: TextIO) -> int:
-    count = 0
-    for record in rows:
-        out.write(json.dumps(export_row(record), ensure_ascii=False) + "\n")
-        count += 1
-    return count
-
-
-def _write_csv(rows: Iterable[StoredRecord], out: TextIO) -> int:
-    """CSV with a header; NULL is an empty cell; payload is the stored canonical JSON text."""
-    writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(EXPORT_COLUMNS)
-    count = 0
-    for r in rows:
-        writer.writerow([r.seq, r.event_id, r.kind, r.fault_code or "", r.source_id or "",
-                         iso_ns(r.occurred_at_ns), r.occurred_at_ns, iso_ns(r.recorded_at_ns),
-                         r.recorded_at_ns, r.schema_version, r.payload_json,
-                         r.prev_hash or "", r.hash])
-        count += 1
-    return count
-
 
 def _export(rows: Iterator[StoredRecord], write: Writer, output: Path | None,
             force: bool = False) -> int:

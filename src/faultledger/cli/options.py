@@ -8,7 +8,6 @@ without cli.main's wrapper (tests, embedding).
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import datetime
@@ -18,10 +17,9 @@ from typing import Annotated, NoReturn
 import typer
 
 from faultledger.cli import render
-from faultledger.domain import validation
-from faultledger.domain.periods import parse_bound
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.errors import DamagedDatabaseError, FaultLedgerError
+from faultledger.service import times
 from faultledger.service.bootstrap import LedgerConfig, Role, open_ledger, resolve
 from faultledger.service.config import Settings, load_settings
 from faultledger.service.ledger import FaultLedger
@@ -56,11 +54,6 @@ TIME_HELP = ("a shift id (2026-11-21/night), a date (2026-11-21) or a date-time 
              "(2026-11-21T22:00, in the calendar's zone unless it has Z or an offset); "
              "see docs/cli.md, Times")
 """The time grammar in one phrase, for `--help` texts."""
-
-SEQ_NUMBER = re.compile(r"[0-9]{1,19}")
-"""A seq number where a time or a seq may be given (ASCII digits that fit 64 bits)."""
-
-_EXAMPLES = "(e.g. 2026-11-21, 2026-11-21T22:00, 2026-11-21T22:00Z or 2026-11-21/night)"
 
 
 def fail(message: str, code: int = 2) -> NoReturn:
@@ -109,34 +102,17 @@ def opened(config: LedgerConfig, *, verifying: bool = False) -> Iterator[FaultLe
 
 
 def parse_time(text: str | None, name: str, calendar: ShiftCalendar, *,
-               upper: bool = False, expected: str = "an ISO 8601 date or time, or a shift id"
-               ) -> datetime | None:
-    """The one time grammar (docs/cli.md, "Times"): a shift id (its start; its end when
-    ``upper``), an ISO date (local midnight in the calendar's zone) or an ISO date-time (in
-    the calendar's zone when naive; an explicit offset or Z is honoured). The result is
-    timezone-aware and within the times the log can hold."""
-    if text is None:
-        return None
-    value = text.strip()
+               upper: bool = False, expected: str = times.EXPECTED_TIME) -> datetime | None:
+    """``service.times.parse_time`` (the one time grammar); bad input is exit 2."""
     try:
-        moment = parse_bound(value, calendar, upper=upper)
-    except ValueError as error:
-        if "outside the times" in str(error):
-            fail(validation.range_message(name, validation.shown(text)))
-        if "/" in value:
-            fail(f"{name}: {error}")
-        fail(f"{name} must be {expected} {_EXAMPLES}, got {validation.shown(text)}")
-    problem = validation.time_error(name, moment)
-    if problem:
-        fail(problem)
-    return moment
+        return times.parse_time(text, name, calendar, upper=upper, expected=expected)
+    except FaultLedgerError as error:
+        fail(str(error))
 
 
 def parse_moment(text: str, name: str, calendar: ShiftCalendar) -> datetime | int:
-    """A seq number (ASCII digits) or a time (``parse_time``): `list --at`, `state-at`."""
-    if SEQ_NUMBER.fullmatch(text.strip()):
-        return int(text.strip())
-    moment = parse_time(text, name, calendar,
-                        expected="a seq number or an ISO 8601 date or time, or a shift id")
-    assert moment is not None
-    return moment
+    """``service.times.parse_moment``: a seq number or a time; bad input is exit 2."""
+    try:
+        return times.parse_moment(text, name, calendar)
+    except FaultLedgerError as error:
+        fail(str(error))

@@ -6,12 +6,9 @@ rows; every figure is defined in docs/statistics.md and computed by the service.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import sys
 from collections.abc import Sequence
-from dataclasses import fields
 from datetime import datetime
 from pathlib import Path
 from typing import Annotated
@@ -37,6 +34,7 @@ from faultledger.cli.shift_report import build_report, duration, group_text, ter
 from faultledger.domain.periods import PERIOD_KINDS
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import GROUP_KEYS, StatsRow
+from faultledger.service.exports import stats_csv
 from faultledger.service.output_files import OutputFileError, check_target, write_output
 
 AsOfOption = Annotated[
@@ -44,8 +42,6 @@ AsOfOption = Annotated[
     typer.Option("--as-of", help=f"End CONFIRMED episodes still open at this time (default: "
                  f"now): {TIME_HELP}."),
 ]
-_FIGURES = [f.name for f in fields(StatsRow) if f.name not in ("period", "group")]
-_PERIOD_FIELDS = ["period", "period_name", "production_day", "start", "end"]
 
 
 def register(app: typer.Typer) -> None:
@@ -103,17 +99,6 @@ def stats(
     else:
         out = render.console(wide=wide)
         out.print(stats_table(rows, by, groups, calendar, code, render.fit_width(out, wide)))
-
-
-def stats_csv(rows: Sequence[StatsRow], group_by: Sequence[str]) -> str:
-    """Every field of ``StatsRow.as_dict``; empty cells for undefined figures."""
-    out = io.StringIO()
-    writer = csv.DictWriter(out, fieldnames=[*_PERIOD_FIELDS, *group_by, *_FIGURES],
-                            lineterminator="\n")
-    writer.writeheader()
-    for row in rows:
-        writer.writerow(row.as_dict())
-    return out.getvalue()
 
 
 def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],

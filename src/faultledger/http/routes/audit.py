@@ -1,0 +1,136 @@
+"""``GET /api/v1/history`` (the audit log, paged by seq, JSON / CSV / JSON Lines with hashes)
+and ``GET /api/v1/state-at`` (time travel): the CLI's `history` and `state-at` over HTTP."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Iterator
+from enum import StrEnum
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Query
+from fastapi.responses import StreamingResponse
+
+from faultledger.errors import InvalidInputError
+from faultledger.http import medkit
+from faultledger.http.context import Context
+from faultledger.service import times
+from faultledger.service.exports import export_row, write_csv, write_jsonl
+from faultledger.service.ledger import export_history, seq_recorded_by
+from faultledger.service.tokens import Permission, Principal
+from faultledger.store.event_log import StoredRecord
+
+PAGE = 1000
+MOST = 10_000
+STREAM_CHUNK = 500
+"""Rows per write of a CSV / JSON Lines answer: a long export streams in pieces."""
+
+
+class Format(StrEnum):
+    json = "json"
+    csv = "csv"
+    jsonl = "jsonl"
+
+
+def _chunks(rows: Iterator[StoredRecord], write: Any) -> Iterator[str]:
+    """Text of ``write(rows, out)`` in pieces of ``STREAM_CHUNK`` rows; the CSV header
+    once."""
+    first = True
+    while True:
+        batch = [row for _, row in zip(range(STREAM_CHUNK), rows, strict=False)]
+        if not batch and not first:
+            return
+        out = io.StringIO()
+        write(batch, out)
+        text = out.getvalue()
+        if not first and write is write_csv:
+            text = text.split("\n", 1)[1]  # the header only once
+        first = False
+        yield text
+        if len(batch) < STREAM_CHUNK:
+            return
+
+
+def router(context: Context) -> APIRouter:
+    api = APIRouter(prefix="/api/v1", tags=["audit"])
+    ledger = context.ledger
+    read = Depends(context.auth.need(Permission.READ))
+
+    @api.get("/history", summary="Log records in seq order (the audit trail), paged by seq",
+             response_model=None)
+    def history(
+        code: Annotated[list[str] | None, Query(
+            description="fault code or case-sensitive glob (repeatable: any)")] = None,
+        source: str | None = None,
+        kind: Annotated[list[str] | None, Query(description="record kind (repeatable)")] = None,
+        since: Annotated[str | None, Query(
+            description="occurred_at from (inclusive): shift id, date or date-time")] = None,
+        until: Annotated[str | None, Query(
+            description="occurred_at before (exclusive); a shift id means its end")] = None,
+        from_seq: Annotated[int | None, Query(ge=1)] = None,
+        to_seq: Annotated[int | None, Query(ge=1)] = None,
+        after_seq: Annotated[int, Query(ge=0, description="page: records after this seq")] = 0,
+        limit: Annotated[int | None, Query(ge=1, le=MOST, description=(
+            f"records per page (json: default {PAGE}); csv/jsonl: all when not given"))] = None,
+        format: Format = Format.json,
+        _: Principal = read,
+    ) -> Any:
+        calendar = context.calendar
+        if from_seq is not None and to_seq is not None and from_seq > to_seq:
+            raise InvalidInputError(f"from_seq {from_seq} is after to_seq {to_seq}: the range "
+                                    "is empty")
+        first_seq = max(from_seq or 1, after_seq + 1)
+        past_end = to_seq is not None and first_seq > to_seq  # paged past to_seq
+        filters: dict[str, Any] = {
+            "codes": code or None, "source": source, "kinds": kind or (),
+            "since": times.parse_time(since, "since", calendar),
+            "until": times.parse_time(until, "until", calendar, upper=True),
+            "from_seq": first_seq, "to_seq": to_seq,
+        }
+
+        def select(most: int | None) -> Iterator[StoredRecord]:
+            return iter(()) if past_end else export_history(ledger, limit=most, **filters)
+
+        if format is Format.json:
+            page = limit or PAGE
+            rows = list(select(page + 1))
+            more = len(rows) > page
+            items = [export_row(row) for row in rows[:page]]
+            return {"items": items,
+                    "next_after_seq": items[-1]["seq"] if more and items else None}
+        rows_iter = select(limit)
+        first_row = next(rows_iter, None)  # bad filters fail here, before any byte is sent
+
+        def all_rows() -> Iterator[StoredRecord]:
+            if first_row is not None:
+                yield first_row
+                yield from rows_iter
+
+        if format is Format.csv:
+            return StreamingResponse(_chunks(all_rows(), write_csv), media_type="text/csv",
+                                     headers=_attachment("history.csv"))
+        return StreamingResponse(_chunks(all_rows(), write_jsonl),
+                                 media_type="application/x-ndjson",
+                                 headers=_attachment("history.jsonl"))
+
+    @api.get("/state-at", summary="Faults as they stood after a seq or at a time")
+    def state_at(at: Annotated[str, Query(
+                     description="a seq number, or a time: shift id, date or date-time")],
+                 status: str = "all", _: Principal = read) -> dict[str, Any]:
+        moment = times.parse_moment(at, "at", context.calendar)
+        wanted = medkit.STATUS_GROUPS.get(status)
+        if wanted is None:
+            raise InvalidInputError(f"status must be one of {medkit.ALLOWED_STATUS_VALUES}, "
+                                    f"got {status[:40]!r}")
+        seq = seq_recorded_by(ledger, moment)
+        faults = [f for f in ledger.state_at(seq) if f.status in wanted]
+        answer = medkit.fault_list(faults)
+        answer["x-medkit"]["seq"] = seq
+        return answer
+
+    return api
+
+
+def _attachment(name: str) -> dict[str, str]:
+    return {"Content-Disposition": f'attachment; filename="{name}"'}
+

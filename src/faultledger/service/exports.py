@@ -1,0 +1,80 @@
+"""The audit export formats (CSV, JSON Lines), shared by `faultledger history` and
+``GET /api/v1/history``: every stored column and hash, so the chain can be recomputed from an
+export alone (docs/operations.md, "Export formats")."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import fields
+from typing import Any, TextIO
+
+from faultledger.domain.clock import iso_ns
+from faultledger.domain.stat_rows import StatsRow
+from faultledger.store.event_log import StoredRecord
+
+EXPORT_COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "occurred_at",
+                  "occurred_at_ns", "recorded_at", "recorded_at_ns", "schema_version",
+                  "payload", "prev_hash", "hash")
+"""Export columns, in order (docs/operations.md, "Export formats")."""
+
+
+def export_row(record: StoredRecord) -> dict[str, Any]:
+    """One record as an export object; ``payload`` is the stored canonical JSON, parsed."""
+    return {
+        "seq": record.seq,
+        "event_id": record.event_id,
+        "kind": record.kind,
+        "fault_code": record.fault_code,
+        "source_id": record.source_id,
+        "occurred_at": iso_ns(record.occurred_at_ns),
+        "occurred_at_ns": record.occurred_at_ns,
+        "recorded_at": iso_ns(record.recorded_at_ns),
+        "recorded_at_ns": record.recorded_at_ns,
+        "schema_version": record.schema_version,
+        "payload": json.loads(record.payload_json),
+        "prev_hash": record.prev_hash,
+        "hash": record.hash,
+    }
+
+
+Writer = Callable[[Iterable[StoredRecord], TextIO], int]
+
+
+def write_jsonl(rows: Iterable[StoredRecord], out: TextIO) -> int:
+    count = 0
+    for record in rows:
+        out.write(json.dumps(export_row(record), ensure_ascii=False) + "\n")
+        count += 1
+    return count
+
+
+def write_csv(rows: Iterable[StoredRecord], out: TextIO) -> int:
+    """CSV with a header; NULL is an empty cell; payload is the stored canonical JSON text."""
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(EXPORT_COLUMNS)
+    count = 0
+    for r in rows:
+        writer.writerow([r.seq, r.event_id, r.kind, r.fault_code or "", r.source_id or "",
+                         iso_ns(r.occurred_at_ns), r.occurred_at_ns, iso_ns(r.recorded_at_ns),
+                         r.recorded_at_ns, r.schema_version, r.payload_json,
+                         r.prev_hash or "", r.hash])
+        count += 1
+    return count
+
+
+STATS_FIGURES = [f.name for f in fields(StatsRow) if f.name not in ("period", "group")]
+STATS_PERIOD_FIELDS = ["period", "period_name", "production_day", "start", "end"]
+
+
+def stats_csv(rows: Sequence[StatsRow], group_by: Sequence[str]) -> str:
+    """Every field of ``StatsRow.as_dict``; empty cells for undefined figures."""
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=[*STATS_PERIOD_FIELDS, *group_by, *STATS_FIGURES],
+                            lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow(row.as_dict())
+    return out.getvalue()
