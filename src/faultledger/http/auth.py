@@ -92,24 +92,24 @@ class BodyLimit:
                     raise _TooLarge
             return message
 
-        started = False
+        replaced = False
 
-        async def tracking_send(message: dict[str, Any]) -> None:
-            nonlocal started
-            if message["type"] == "http.response.start":
-                started = True
+        async def checked_send(message: dict[str, Any]) -> None:
+            """Whatever the app answers to a body it could not finish reading (frameworks
+            turn the interruption into their own 400), the client gets the 413."""
+            nonlocal replaced
+            if refused:
+                if not replaced:
+                    replaced = True
+                    await self._refuse(send)
+                return
             await send(message)
 
         try:
-            await self.app(scope, limited, tracking_send)
+            await self.app(scope, limited, checked_send)
         except _TooLarge:
-            if not started:
+            if not replaced:
                 await self._refuse(send)
-        except Exception:
-            if refused and not started:
-                await self._refuse(send)
-            else:
-                raise
 
     async def _refuse(self, send: Any) -> None:
         import json

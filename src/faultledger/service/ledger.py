@@ -47,6 +47,7 @@ from faultledger.service.results import (
     ReportResult,
     VerifyReport,
 )
+from faultledger.service.telemetry import Snapshot
 from faultledger.service.writer import (
     CatchUp,
     Clear,
@@ -166,6 +167,11 @@ class FaultLedger:
     def policy(self) -> Policy:
         """The policy in force: the last one recorded in the log (or the default)."""
         return self._writer.projector.policy
+
+    @property
+    def telemetry(self) -> Snapshot:
+        """What this process's writer appended, and its commit latencies (for metrics)."""
+        return self._writer.telemetry.snapshot()
 
     @property
     def last_seq(self) -> int:

@@ -44,6 +44,7 @@ from faultledger.errors import (
     WriteConflictError,
 )
 from faultledger.service.results import ClearResult, ReportResult
+from faultledger.service.telemetry import Telemetry
 from faultledger.store import event_log, projections, stat_tables
 from faultledger.store.database import Database, WriteConnection
 
@@ -198,6 +199,8 @@ class Writer:
         self._reclaim = False
         """Set by "disk full": checkpoint and truncate the WAL before the next commit."""
         self.commits = 0
+        self.telemetry = Telemetry()
+        """Records appended and commit latency of this writer (``GET /metrics``)."""
 
     def submit(self, command: Command) -> Any:
         """Queue a command and return its result once it is durable (or failed)."""
@@ -297,6 +300,7 @@ class Writer:
         of one of them; should one still raise something unexpected, every command of the
         group is committed alone, so only the culprit fails (isolation as a last resort).
         """
+        started = time.perf_counter()
         if self._reclaim:
             self._reclaim = not self._connection.reclaim()
         elif self._connection.low_space and self.commits % 100 == 0:
@@ -328,6 +332,8 @@ class Writer:
             self._fail(group, InternalError(f"internal error while writing: {clipped(error)}"))
             return
         self.commits += 1
+        if batch.records:
+            self.telemetry.committed(batch.records, time.perf_counter() - started)
         if batch.notifications:
             self._announce(batch.notifications)
         for pending in group:

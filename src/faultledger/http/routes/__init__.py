@@ -8,7 +8,7 @@ from faultledger.http.context import Context
 
 
 def register(app: FastAPI, context: Context) -> None:
-    from faultledger.http.routes import audit, faults, reports, stats, system
+    from faultledger.http.routes import audit, faults, metrics, reports, stats, system
 
-    for module in (faults, reports, audit, stats, system):
+    for module in (faults, reports, audit, stats, metrics, system):
         app.include_router(module.router(context))

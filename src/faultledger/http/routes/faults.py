@@ -157,7 +157,7 @@ def router(context: Context) -> APIRouter:
 
 def _entity_routes(api: APIRouter, context: Context, kind: str, read: Any) -> None:
     """``/{apps,components,areas,functions}/{id}/faults[/{code}]``: the faults an entity
-    reported (every reporting source of the fault is that entity or below it)."""
+    reported (a reporting source is the id or ends in ``/id``, as ``list_faults_for_entity``)."""
     ledger = context.ledger
 
     def in_scope(entity_id: str) -> list[Fault]:

@@ -1,0 +1,73 @@
+"""Prometheus metrics, computed at scrape time from the ledger and the stream hub (docs/http.md,
+"Metrics"). A registry of our own per app: nothing global, nothing counted twice."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterator
+
+from prometheus_client import CollectorRegistry
+from prometheus_client.core import (
+    CounterMetricFamily,
+    GaugeMetricFamily,
+    HistogramMetricFamily,
+    Metric,
+)
+from prometheus_client.registry import Collector
+
+from faultledger.domain.types import FaultStatus
+from faultledger.http.context import Context
+from faultledger.http.medkit import severity_label
+from faultledger.service.telemetry import COMMIT_BUCKETS
+
+
+class LedgerCollector(Collector):
+    def __init__(self, context: Context) -> None:
+        self._context = context
+
+    def collect(self) -> Iterator[Metric]:
+        ledger = self._context.ledger
+        faults = GaugeMetricFamily("faultledger_faults", "Faults by status and severity",
+                                   labels=["status", "severity"])
+        counts = Counter((f.status.value, severity_label(f.severity))
+                         for f in ledger.all_faults())
+        for status in FaultStatus:
+            for severity in ("INFO", "WARN", "ERROR", "CRITICAL"):
+                faults.add_metric([status.value, severity], counts.get((status.value, severity),
+                                                                       0))
+        yield faults
+        snapshot = ledger.telemetry
+        reports = CounterMetricFamily("faultledger_reports", "Reports this process recorded, "
+                                      "by event type", labels=["event_type"])
+        for event_type in ("FAILED", "PASSED"):
+            reports.add_metric([event_type], snapshot.reports.get(event_type, 0))
+        yield reports
+        records = CounterMetricFamily("faultledger_records", "Log records this process "
+                                      "appended, by kind", labels=["kind"])
+        for kind, count in sorted(snapshot.records.items()):
+            records.add_metric([kind], count)
+        yield records
+        cumulative, buckets = 0, []
+        for bound, count in zip((*map(str, COMMIT_BUCKETS), "+Inf"), snapshot.commit_buckets,
+                                strict=True):
+            cumulative += count
+            buckets.append((bound, cumulative))
+        latency = HistogramMetricFamily("faultledger_commit_seconds", "Group commit latency "
+                                        "of this process's writer (append to durable)")
+        latency.add_metric([], buckets, snapshot.commit_seconds_sum)
+        yield latency
+        yield GaugeMetricFamily("faultledger_last_seq", "Seq of the newest record this "
+                                "process has applied", value=ledger.last_seq)
+        hub = self._context.hub
+        yield GaugeMetricFamily("faultledger_stream_clients", "Connected event stream "
+                                "clients", value=hub.clients)
+        dropped = CounterMetricFamily("faultledger_stream_dropped_clients", "Stream clients "
+                                      "disconnected for falling behind the buffer")
+        dropped.add_metric([], hub.dropped_clients)
+        yield dropped
+
+
+def registry(context: Context) -> CollectorRegistry:
+    found = CollectorRegistry(auto_describe=False)
+    found.register(LedgerCollector(context))
+    return found

@@ -1,0 +1,58 @@
+"""What this process's writer did, for metrics (``GET /metrics``): records appended by kind,
+reports by event type, group-commit latency. Plain counters, updated once per commit under
+one lock, so the service does not depend on any metrics library."""
+
+from __future__ import annotations
+
+import bisect
+import threading
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from faultledger.domain.events import FaultReported, LogRecord
+
+COMMIT_BUCKETS = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5)
+"""Upper bounds (seconds) of the commit latency histogram; one more bucket holds the rest."""
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    records: dict[str, int]
+    """Records appended by kind."""
+    reports: dict[str, int]
+    """``fault_reported`` records by event type (FAILED, PASSED)."""
+    commits: int
+    commit_seconds_sum: float
+    commit_buckets: tuple[int, ...]
+    """Commits per bucket of ``COMMIT_BUCKETS`` (not cumulative), then the overflow."""
+
+
+class Telemetry:
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._records: Counter[str] = Counter()
+        self._reports: Counter[str] = Counter()
+        self._commits = 0
+        self._seconds = 0.0
+        self._buckets = [0] * (len(COMMIT_BUCKETS) + 1)
+
+    def committed(self, records: Sequence[LogRecord], seconds: float) -> None:
+        kinds: Counter[str] = Counter()
+        types: Counter[str] = Counter()
+        for record in records:
+            event = record.event
+            kinds[event.kind] += 1
+            if isinstance(event, FaultReported):
+                types[event.event_type.name] += 1
+        with self._lock:
+            self._records.update(kinds)
+            self._reports.update(types)
+            self._commits += 1
+            self._seconds += seconds
+            self._buckets[bisect.bisect_left(COMMIT_BUCKETS, seconds)] += 1
+
+    def snapshot(self) -> Snapshot:
+        with self._lock:
+            return Snapshot(dict(self._records), dict(self._reports), self._commits,
+                            self._seconds, tuple(self._buckets))
