@@ -8,7 +8,8 @@ from faultledger.http.context import Context
 
 
 def register(app: FastAPI, context: Context) -> None:
+    from faultledger.http import dashboard
     from faultledger.http.routes import audit, faults, metrics, reports, stats, system
 
-    for module in (faults, reports, audit, stats, metrics, system):
+    for module in (faults, reports, audit, stats, metrics, system, dashboard):
         app.include_router(module.router(context))

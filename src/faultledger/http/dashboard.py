@@ -1,0 +1,47 @@
+"""The web dashboard: one page at ``/`` and its assets at ``/static/…``, all served by this
+server (robots have no internet). The page talks to the same API as any client (docs/http.md,
+"Dashboard"); it needs no token itself and asks for one when the API answers 401."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+from fastapi import APIRouter
+from fastapi.responses import FileResponse, HTMLResponse
+from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
+
+from faultledger.errors import Reason
+from faultledger.http.context import Context
+from faultledger.http.errors import ApiError
+from faultledger.version import version
+
+STATIC = Path(__file__).resolve().parent / "static"
+MEDIA = {".js": "text/javascript", ".css": "text/css", ".svg": "image/svg+xml"}
+
+
+@lru_cache(maxsize=1)
+def _environment() -> Environment:
+    return Environment(loader=PackageLoader("faultledger", "templates"),
+                       autoescape=select_autoescape(default=True), undefined=StrictUndefined)
+
+
+def router(context: Context) -> APIRouter:
+    api = APIRouter(tags=["dashboard"], include_in_schema=False)
+    page = _environment().get_template("dashboard.html").render(
+        version=version(), read_only=context.read_only,
+        zone=str(context.calendar.zone))
+
+    @api.get("/", response_class=HTMLResponse)
+    def dashboard() -> HTMLResponse:
+        return HTMLResponse(page, headers={"Cache-Control": "no-cache"})
+
+    @api.get("/static/{name}")
+    def asset(name: str) -> FileResponse:
+        path = STATIC / name
+        if "/" in name or name.startswith(".") or path.suffix not in MEDIA or not path.is_file():
+            raise ApiError(Reason.NOT_FOUND, f"no such file: {name[:60]!r}")
+        return FileResponse(path, media_type=MEDIA[path.suffix],
+                            headers={"Cache-Control": "no-cache"})
+
+    return api
