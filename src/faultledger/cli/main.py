@@ -257,6 +257,9 @@ def serve(
     follower: Annotated[bool, typer.Option(
         "--follower", help="Serve reads only, as /fault_manager_follower, next to a running "
         "/fault_manager on the same database; reports and clears are refused.")] = False,
+    http: Annotated[str | None, typer.Option(
+        "--http", help="Also serve the HTTP API and dashboard on [HOST:]PORT (e.g. 8080 or "
+        "127.0.0.1:8080; docs/http.md), over the same ledger.")] = None,
 ) -> None:
     """Run the ROS 2 fault manager node (`/fault_manager`) until SIGINT/SIGTERM.
 
@@ -267,7 +270,8 @@ def serve(
         from faultledger.ros.serve import serve as run_node
     except ImportError as error:
         fail(f"ROS 2 is not installed in this environment ({error}); run `make interfaces`")
-    raise typer.Exit(run_node(settings_for(config), db, list(ctx.args), follower=follower))
+    raise typer.Exit(run_node(settings_for(config), db, list(ctx.args), follower=follower,
+                              http_listen=http))
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})

@@ -24,6 +24,7 @@ from rclpy.utilities import (
 
 from faultledger.domain.text import printable
 from faultledger.errors import ConfigError
+from faultledger.http.server import HttpServer
 from faultledger.ros.bridges.runner import RunningBridge, settings_from, start_bridge
 from faultledger.ros.guard import clip, guard_callback
 from faultledger.ros.network import scope
@@ -178,7 +179,7 @@ def answers(node: Node, service: str, timeout_sec: float = 2.0) -> bool:
 
 
 def serve(settings: Settings, db_url: str | None, ros_args: list[str],
-          follower: bool = False) -> int:
+          follower: bool = False, http_listen: str | None = None) -> int:
     """Serve until a signal; the database URL is --db, else ``database_path``, else config.
 
     ``follower``: a read-only follower (``fault_manager_follower``) on the same database:
@@ -228,6 +229,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
     manager: FaultManagerNode | None = None
     bridges: list[RunningBridge] = []
     anchors: AnchorScheduler | None = None
+    web: HttpServer | None = None
     executor = make_executor()
     try:
         node.declare_parameter("database_path", "")
@@ -248,10 +250,17 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
             if entry.get("enabled", False) and not follower:
                 bridges.append(start_bridge(name, settings_from(entry), executor,
                                             manager=node.get_fully_qualified_name()))
+        if http_listen is not None:
+            # The same ledger: one writer for ROS and HTTP (docs/http.md).
+            web = HttpServer(ledger, settings.http, config.calendar, http_listen,
+                             read_only=follower)
+            web.start()
         restored = ledger.restored
         mode = f" follower of {leader} (read-only)" if follower else ""
         print(f"fault_manager ready: db={describe(url)} faults={restored.faults} "
               f"events={restored.events} replayed={restored.replayed}{mode}", flush=True)
+        if web is not None:
+            print(f"http ready: dashboard {web.url} API {web.url}docs", flush=True)
         node.get_logger().info(
             f"serving {node.get_fully_qualified_name()}{mode} on {describe(url)}: restored "
             f"{restored.faults} faults from {restored.events} events")
@@ -259,6 +268,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
         if manager is not None:
             drain_reads(executor, manager)
     finally:
+        if web is not None:
+            web.stop()
         for bridge in bridges:
             bridge.close()
         if manager is not None:
