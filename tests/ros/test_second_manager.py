@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import pytest
 from ros2_medkit_msgs.srv import ClearFault, ListFaults, ReportFault
 
 if TYPE_CHECKING:
@@ -18,9 +17,6 @@ if TYPE_CHECKING:
 FOLLOWER = "/fault_manager_follower"
 
 
-@pytest.mark.xfail(strict=False, raises=subprocess.TimeoutExpired, reason=(
-    "about 1 run in 3 of this file together with test_services.py, the refused second serve "
-    "does not exit; py-spy found no Python frame of ours waiting (open, see docs/ros.md)"))
 def test_a_second_manager_is_refused_naming_the_first(
         tmp_path: Path, manager: ManagerFactory, client: RosClient) -> None:
     manager()

@@ -247,11 +247,8 @@ class FaultManagerNode:
             log_failure(self.log, name, error, f" ({len(requests)} report(s) not accepted)")
             results = [ReportResult(False, error_text(error))] * len(requests)
         else:
-            for r, result in zip(requests, results, strict=True):
-                if not result.accepted:
-                    self.log.warning(
-                        f"report of '{clip(r.fault_code)}' from '{clip(r.source_id)}' "
-                        f"rejected: {clip(result.message, MESSAGE_LIMIT)}")
+            self._log_rejected(requests, results, lambda r: (
+                f"report of '{clip(r.fault_code)}' from '{clip(r.source_id)}'"))
         self._answer_queued(service, queued, results[1:], name)
         return self._answer(response, results[0])
 
@@ -277,13 +274,20 @@ class FaultManagerNode:
             log_failure(self.log, name, error, f" ({len(valid)} goal outcome(s) not accepted)")
             recorded = iter([ReportResult(False, error_text(error))] * len(valid))
         answers = [result if result is not None else next(recorded) for result in results]
-        for r, result in zip(requests, answers, strict=True):
-            if not result.accepted:
-                self.log.warning(
-                    f"goal outcome of '{clip(r.action)}' goal '{clip(r.goal_id)}' from "
-                    f"'{clip(r.server_node)}' rejected: {clip(result.message, MESSAGE_LIMIT)}")
+        self._log_rejected(requests, answers, lambda r: (
+            f"goal outcome of '{clip(r.action)}' goal '{clip(r.goal_id)}' from "
+            f"'{clip(r.server_node)}'"))
         self._answer_queued(service, queued, answers[1:], name)
         return self._answer(response, answers[0])
+
+    def _log_rejected(self, requests: list[Any], results: list[ReportResult],
+                      describe: Callable[[Any], str]) -> None:
+        """One warning per request of a burst that was not accepted: ``<describe(request)>
+        rejected: <why>``."""
+        for r, result in zip(requests, results, strict=True):
+            if not result.accepted:
+                self.log.warning(
+                    f"{describe(r)} rejected: {clip(result.message, MESSAGE_LIMIT)}")
 
     def _answer_queued(self, service: Service, queued: list[tuple[Any, Any]],
                        results: list[ReportResult], name: str) -> None:

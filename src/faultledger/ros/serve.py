@@ -15,6 +15,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 from rclpy.utilities import (
     get_default_context,
     get_rmw_implementation_identifier,
@@ -98,8 +99,18 @@ def security_failure(step: str, error: Exception) -> Exception:
 
 FOLLOWER_NAME = f"{NODE_NAME}_follower"
 """A read-only follower's node name: it coexists with the manager it follows."""
-DISCOVERY_WAIT_SEC = 1.5
-"""How long ``serve`` watches the ROS graph for another manager before serving."""
+DISCOVERY_WAIT_SEC = 5.0
+"""How long ``serve`` watches the ROS graph for another manager before serving.
+
+Longer than one period of Fast DDS's participant announcements and reliable heartbeats (3 s
+each by default): a new participant that misses the first exchange with a running manager
+only sees it after the next one. Measured here (2 cores, idle): the manager's
+``report_fault`` appeared 0-2.8 s after the node was created, its node name 1.2-4.4 s; with
+the former 1.5 s, a second manager started under load sometimes saw nothing and served too.
+"""
+PROBE_RESEND_SEC = 1.0
+"""How often ``answers`` sends its request again: a request sent before the other side has
+matched our reply reader is dropped by it (rmw_fastrtps), and waiting longer will not help."""
 
 
 def create_node(name: str = NODE_NAME) -> Node:
@@ -113,8 +124,10 @@ def create_node(name: str = NODE_NAME) -> Node:
 def other_manager(node: Node, follower: bool, wait_sec: float = DISCOVERY_WAIT_SEC
                   ) -> str | None:
     """Why ``node`` must not serve, or None: within ``wait_sec`` the graph shows another
-    node of the same name, or (unless ``follower``) someone already serving its
-    ``report_fault``. Called before our services exist, so any server found is another."""
+    node of the same name, or someone already serving its ``report_fault`` (a follower's is
+    ``/fault_manager_follower/report_fault``: only another follower serves it), and that
+    other answers a request. Called before our services exist, so any server found is
+    another."""
     fqn = node.get_fully_qualified_name()
     name, namespace = node.get_name(), node.get_namespace()
     service = f"{fqn}/report_fault"
@@ -122,14 +135,13 @@ def other_manager(node: Node, follower: bool, wait_sec: float = DISCOVERY_WAIT_S
     while True:
         same = sum(1 for n, ns in node.get_node_names_and_namespaces()
                    if n == name and ns == namespace)
-        served = not follower and any(
-            s == service for s, _ in node.get_service_names_and_types())
+        served = any(s == service for s, _ in node.get_service_names_and_types())
         if same > 1 or served:
             break
         if time.monotonic() >= deadline:
             return None
         time.sleep(0.05)
-    if not answers(node, f"{fqn}/list_faults"):
+    if not answers(node, f"{fqn}/list_faults", timeout_sec=wait_sec):
         return None  # a process killed with -9 stays in the graph until its lease expires
     what = f"serves {service}" if served else f"runs as {fqn}"
     other = fqn  # the service is <node>/report_fault; rcl does not say which process
@@ -155,26 +167,34 @@ def _give_up(found: list[str]) -> None:
     os._exit(2)
 
 
-def answers(node: Node, service: str, timeout_sec: float = 2.0) -> bool:
-    """Whether someone answers a ``ListFaults`` on ``service`` within ``timeout_sec``."""
+def answers(node: Node, service: str, timeout_sec: float = DISCOVERY_WAIT_SEC) -> bool:
+    """Whether someone answers a ``ListFaults`` on ``service`` within ``timeout_sec``: the
+    request is sent again every ``PROBE_RESEND_SEC`` until one of them is answered."""
     from ros2_medkit_msgs.srv import ListFaults
 
+    deadline = time.monotonic() + timeout_sec
     client = node.create_client(ListFaults, service)
+    executor = SingleThreadedExecutor()  # our own, dropped before serving starts
+    executor.add_node(node)
+    futures: list[Future] = []
     try:
         if not client.wait_for_service(timeout_sec=timeout_sec):
             return False
-        future = client.call_async(ListFaults.Request())
-        executor = SingleThreadedExecutor()  # our own, dropped before serving starts
-        executor.add_node(node)
-        deadline = time.monotonic() + timeout_sec
-        while not future.done() and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
+        resend = 0.0
+        while not any(f.done() for f in futures) and time.monotonic() < deadline:
+            if time.monotonic() >= resend:
+                futures.append(client.call_async(ListFaults.Request()))
+                resend = time.monotonic() + PROBE_RESEND_SEC
+            executor.spin_once(timeout_sec=0.05)
+        return any(f.done() for f in futures)
+    finally:
+        for future in futures:
+            if not future.done():
+                client.remove_pending_request(future)
         executor.remove_node(node)
         # Bounded: shutdown() waits for work in flight, and a reply arriving after the
         # deadline leaves a task it would wait for forever.
         executor.shutdown(timeout_sec=1.0)
-        return bool(future.done())
-    finally:
         node.destroy_client(client)
 
 
@@ -205,8 +225,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
     except BaseException:
         try_shutdown()
         raise
-    # rclpy occasionally hangs in the graph check or in tearing a refused node down (seen
-    # under load): a refused start must still end, with its message and exit 2.
+    # The check is bounded (DISCOVERY_WAIT_SEC, twice at most); the watchdog is a backstop
+    # should rclpy not return: a start that cannot be checked must still end, with exit 2.
     found: list[str] = []
     watchdog = threading.Timer(CHECK_DEADLINE_SEC, _give_up, (found,))
     watchdog.daemon = True
@@ -219,9 +239,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
         try_shutdown()
         raise
     if refusal is not None:
-        # Said and ended here: tearing down a node that spun a client, and the interpreter's
-        # exit after it, sometimes hang in the DDS layer (seen under load); nothing of ours
-        # needs cleaning up yet (no ledger is open).
+        # Said and ended here: nothing of ours needs cleaning up yet (no ledger is open), and
+        # no DDS teardown can delay the exit.
         found.append(refusal)
         _give_up(found)
     watchdog.cancel()
