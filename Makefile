@@ -52,6 +52,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/rebuild.py --keep var/bench/rebuild.db
 	$(BIN)/python bench/startup.py --db var/bench/rebuild.db
 	$(BIN)/python bench/stats_query.py
+	$(BIN)/python bench/http_api.py
 
 clean:
 	rm -rf $(VENV) var .pytest_cache .mypy_cache .ruff_cache .hypothesis
