@@ -236,7 +236,8 @@ class TestHostileRequests:
         assert network == [
             "fault_manager network: discovery=LOCALHOST (ROS_AUTOMATIC_DISCOVERY_RANGE) "
             f"static_peers=none domain_id={os.environ.get('ROS_DOMAIN_ID', '0')} "
-            "rmw=rmw_fastrtps_cpp security=off"], fault_manager.stdout_lines
+            "rmw=rmw_fastrtps_cpp security=off "
+            "dds_profile=faultledger (announces every 0.5 s)"], fault_manager.stdout_lines
 
     def test_still_serving_afterwards(self, fault_manager: Manager,
                                       shared_client: RosClient) -> None:

@@ -27,6 +27,7 @@ from faultledger.domain.text import printable
 from faultledger.errors import ConfigError
 from faultledger.http.server import HttpServer
 from faultledger.ros.bridges.runner import RunningBridge, settings_from, start_bridge
+from faultledger.ros.dds_profile import use_manager_profile
 from faultledger.ros.guard import clip, guard_callback
 from faultledger.ros.network import scope
 from faultledger.ros.node import NODE_NAME, FaultManagerNode, declare_policy
@@ -78,11 +79,11 @@ def drain_reads(executor: SingleThreadedExecutor, manager: FaultManagerNode,
         spin_once(0.05)
 
 
-def network_line() -> str:
+def network_line(profile: str) -> str:
     """The ``fault_manager network:`` line printed before ``ready`` (docs/ros.md)."""
     domain_id = get_default_context().get_domain_id()
     return (f"fault_manager network: "
-            f"{scope().describe(domain_id, get_rmw_implementation_identifier())}")
+            f"{scope().describe(domain_id, get_rmw_implementation_identifier())} {profile}")
 
 
 def security_failure(step: str, error: Exception) -> Exception:
@@ -99,15 +100,18 @@ def security_failure(step: str, error: Exception) -> Exception:
 
 FOLLOWER_NAME = f"{NODE_NAME}_follower"
 """A read-only follower's node name: it coexists with the manager it follows."""
-DISCOVERY_WAIT_SEC = 5.0
+DISCOVERY_WAIT_SEC = 2.0
 """How long ``serve`` watches the ROS graph for another manager before serving.
 
-Longer than one period of Fast DDS's participant announcements and reliable heartbeats (3 s
-each by default): a new participant that misses the first exchange with a running manager
-only sees it after the next one. Measured here (2 cores, idle): the manager's
-``report_fault`` appeared 0-2.8 s after the node was created, its node name 1.2-4.4 s; with
-the former 1.5 s, a second manager started under load sometimes saw nothing and served too.
+Another ``serve`` announces itself every 0.5 s (dds_profile.py), so it shows up 4 times in this
+window: measured on 2 cores, its ``report_fault`` appeared 0-0.6 s after our node was created.
+A manager on Fast DDS's defaults announces every 3 s and is seen only if it announces within
+the window (about 2 starts in 3); docs/ros.md "A second fault manager". The former 5 s,
+sized for 3 s announcements, made every start of ``make run`` wait that long.
 """
+ANSWER_WAIT_SEC = 5.0
+"""How long a manager found in the graph has to answer ``list_faults`` before it is taken as
+gone (killed with -9, still in the graph until its lease ends). Spent only when one is found."""
 PROBE_RESEND_SEC = 1.0
 """How often ``answers`` sends its request again: a request sent before the other side has
 matched our reply reader is dropped by it (rmw_fastrtps), and waiting longer will not help."""
@@ -141,7 +145,7 @@ def other_manager(node: Node, follower: bool, wait_sec: float = DISCOVERY_WAIT_S
         if time.monotonic() >= deadline:
             return None
         time.sleep(0.05)
-    if not answers(node, f"{fqn}/list_faults", timeout_sec=wait_sec):
+    if not answers(node, f"{fqn}/list_faults"):
         return None  # a process killed with -9 stays in the graph until its lease expires
     what = f"serves {service}" if served else f"runs as {fqn}"
     other = fqn  # the service is <node>/report_fault; rcl does not say which process
@@ -167,7 +171,7 @@ def _give_up(found: list[str]) -> None:
     os._exit(2)
 
 
-def answers(node: Node, service: str, timeout_sec: float = DISCOVERY_WAIT_SEC) -> bool:
+def answers(node: Node, service: str, timeout_sec: float = ANSWER_WAIT_SEC) -> bool:
     """Whether someone answers a ``ListFaults`` on ``service`` within ``timeout_sec``: the
     request is sent again every ``PROBE_RESEND_SEC`` until one of them is answered."""
     from ros2_medkit_msgs.srv import ListFaults
@@ -207,6 +211,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
     role = Role.READER if follower else Role.SERVER
     # Before ROS starts: a bad database URL or shift calendar stops with its message.
     resolve(settings, role, db=db_url, shifts=settings.shifts)
+    profile = use_manager_profile()
     try:
         rclpy.init(args=["faultledger", *ros_args],
                    signal_handler_options=SignalHandlerOptions.NO)
@@ -219,7 +224,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    print(network_line(), flush=True)
+    print(network_line(profile), flush=True)
     try:
         node = create_node(FOLLOWER_NAME if follower else NODE_NAME)
     except BaseException:
