@@ -24,7 +24,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 PACKAGES = tuple(sorted(p.parent.name for p in HERE.glob("*/package.xml")))
 """Every package directory here; none depends on another of ours."""
-SHARED = (HERE / "pypi_wheels_fix.cmake", HERE / "c_and_python_only.cmake")
+SHARED = tuple(sorted(HERE.glob("*.cmake")))
+"""CMake files every package includes: a change to one rebuilds them all."""
 
 
 def definition_hash(package: Path) -> str:
