@@ -17,8 +17,8 @@ from typing import Any
 
 import pytest
 
-from faultledger.cli.shift_report import duration
 from faultledger.domain.stat_rows import StatsRow
+from faultledger.reports.shift import duration
 from tests.cli_stats_scenario import (
     ARM1,
     ARM2,

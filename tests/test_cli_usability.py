@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from faultledger import FaultLedger
-from faultledger.cli import shift_report_html
-from faultledger.cli.shift_report import GLOSSARY, build_report
+from faultledger.reports import shift_html
+from faultledger.reports.shift import GLOSSARY, build_report
 from tests.cli_stats_scenario import (
     AS_OF,
     AS_OF_TEXT,
@@ -232,15 +232,15 @@ def test_report_shift_says_activations_against_failed_reports(scenario: Scenario
 def test_html_has_the_glossary_and_the_png_its_key_figures(scenario: Scenario) -> None:
     with scenario.ledger() as ledger:
         report = build_report(ledger, scenario.calendar, NIGHT, AS_OF)
-    page = shift_report_html.html(report)
+    page = shift_html.html(report)
     assert "<h2>Glossary</h2>" in page
     for term, _ in GLOSSARY:
         assert f"<dt>{term}</dt>" in page
     assert report.headline in page
-    lines = shift_report_html.key_figures_lines(report)
+    lines = shift_html.key_figures_lines(report)
     assert lines[0].startswith(f"Shift {NIGHT}:")
     assert lines[1] == report.headline
-    assert shift_report_html.charts_png(report).startswith(b"\x89PNG")
+    assert shift_html.charts_png(report).startswith(b"\x89PNG")
 
 
 def test_a_duration_longer_than_the_shift_says_why(scenario: Scenario) -> None:

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from faultledger.cli.shift_report import duration, last_completed
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import StatsRow
 from faultledger.errors import InvalidInputError
+from faultledger.reports.shift import duration, last_completed
 from tests.cli_stats_scenario import (
     ARM1,
     AS_OF,

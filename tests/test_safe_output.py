@@ -29,10 +29,10 @@ from rich.console import Console
 from rich.table import Table
 
 from faultledger import FaultLedger, Policy
-from faultledger.cli import shift_report_html
 from faultledger.cli.render import complain
 from faultledger.cli.safe_text import cell, printable
 from faultledger.domain.policy import SourceOverride
+from faultledger.reports import shift_html
 
 OSC8 = "\x1b]8;;http://x\x1b\\click\x1b]8;;\x1b\\"
 """An OSC-8 hyperlink: ``click`` linking to http://x in a terminal that honours it."""
@@ -401,7 +401,7 @@ def _hostile_context(value: str) -> dict[str, Any]:
 def test_every_slot_of_the_html_template_is_escaped_attributes_too() -> None:
     """Every value the template shows, including class and alt attributes and the image
     data, given the hostile text: nothing comes out raw."""
-    template = shift_report_html._environment().get_template(shift_report_html.TEMPLATE)
+    template = shift_html._environment().get_template(shift_html.TEMPLATE)
     page = template.render(_hostile_context(HTML_HOSTILE))
     assert_html_safe(page)
     escaped = "&lt;script&gt;alert(1)&lt;/script&gt;&#34;onmouseover=alert(2)"
@@ -413,7 +413,7 @@ def test_every_slot_of_the_html_template_is_escaped_attributes_too() -> None:
 # -- faultledger nodes -------------------------------------------------------------------------
 def test_nodes_view_rows_show_publisher_text_literally() -> None:
     """Node names, package, type and messages come from any publisher on /nodemon/state."""
-    nodes_view = pytest.importorskip("faultledger.ros.nodes_view")  # needs rclpy
+    nodes_view = pytest.importorskip("faultledger.cli.nodes_view")  # needs rclpy
     from faultledger.ros.bridges.node_state import node_state_type
 
     pytest.importorskip("nodemon_msgs.msg")  # built by `make interfaces`

@@ -321,7 +321,7 @@ def nodes(
     if sort not in ("name", "state", "age"):
         fail(f"--sort must be name, state or age, got {printable(sort)!r}")
     try:
-        from faultledger.ros.nodes_view import run_nodes_view
+        from faultledger.cli.nodes_view import run_nodes_view
     except ImportError as error:
         fail(f"ROS 2 is not installed in this environment ({error}); run `make interfaces`")
     raise typer.Exit(run_nodes_view(topic, once, listen_sec, list(ctx.args), sort=sort,

@@ -18,7 +18,7 @@ from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.integrity import canonical_json
 from faultledger.domain.projector import Transition
-from faultledger.domain.types import FaultStatus, Severity
+from faultledger.domain.types import FaultStatus, severity_name
 from faultledger.store.database import describe
 
 _STATUS_STYLE = {
@@ -39,10 +39,6 @@ def short(moment: datetime | None) -> str:
     if moment is None:
         return "-"
     return moment.astimezone(UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
-
-
-def severity_name(value: int) -> str:
-    return Severity(value).name if value in Severity._value2member_map_ else str(value)
 
 
 def fault_dict(fault: Fault) -> dict[str, Any]:

@@ -30,10 +30,11 @@ from faultledger.cli.options import (
 )
 from faultledger.cli.render import Cell, Column, fitted
 from faultledger.cli.safe_text import cell, printable
-from faultledger.cli.shift_report import build_report, duration, group_text, terminal
+from faultledger.cli.shift_report import terminal
 from faultledger.domain.periods import PERIOD_KINDS
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import GROUP_KEYS, StatsRow
+from faultledger.reports.shift import build_report, duration, group_text
 from faultledger.service.exports import stats_csv
 from faultledger.service.output_files import OutputFileError, check_target, write_output
 
@@ -181,13 +182,13 @@ def report_shift(
     out.print(terminal(report, render.fit_width(out, wide), glossary=glossary))
     if html_file is None and png_file is None:
         return
-    from faultledger.cli import shift_report_html  # matplotlib: only when a file is wanted
+    from faultledger.reports import shift_html  # matplotlib: only when a file is wanted
 
     outputs: list[tuple[Path, bytes]] = []
     if html_file is not None:
-        outputs.append((html_file, shift_report_html.html(report).encode("utf-8")))
+        outputs.append((html_file, shift_html.html(report).encode("utf-8")))
     if png_file is not None:
-        outputs.append((png_file, shift_report_html.charts_png(report)))
+        outputs.append((png_file, shift_html.charts_png(report)))
     for path, data in outputs:
         try:
             write_output(path, data, force)

@@ -20,6 +20,11 @@ class Severity(IntEnum):
     CRITICAL = 3
 
 
+def severity_name(value: int) -> str:
+    """``ERROR`` for a known severity, the number for any other (stored as reported)."""
+    return Severity(value).name if value in Severity._value2member_map_ else str(value)
+
+
 class EventType(IntEnum):
     """What a reporter says about a fault; the values are the ROS wire values."""
 

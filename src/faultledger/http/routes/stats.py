@@ -62,10 +62,10 @@ def router(context: Context) -> APIRouter:
         ] = None,
         as_of: str | None = None, _: Principal = read,
     ) -> HTMLResponse:
-        # The report's builders live beside `report-shift` (cli/shift_report*.py): pure
-        # functions of a ledger and a calendar, shared here rather than copied.
-        from faultledger.cli.shift_report import build_report
-        from faultledger.cli.shift_report_html import html
+        # The same builder and HTML as `report-shift --html` (faultledger.reports); imported
+        # here so matplotlib loads only when a report is asked for.
+        from faultledger.reports.shift import build_report
+        from faultledger.reports.shift_html import html
 
         try:
             report = build_report(ledger, context.calendar, shift, moment(as_of, "as_of"))

@@ -20,9 +20,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from faultledger.cli.render import severity_name
-from faultledger.cli.safe_text import printable
-from faultledger.cli.shift_report import (
+from faultledger.domain.text import printable
+from faultledger.domain.types import severity_name
+from faultledger.reports.shift import (
     GLOSSARY,
     TOP,
     ShiftReport,
