@@ -2,8 +2,9 @@
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed
 ROS_STAMP := $(VENV)/.ros-installed
+STAMP  := $(VENV)/.installed
+DEV_STAMP := $(VENV)/.dev-installed
 
 .PHONY: run test lint typecheck unit ros-tests interfaces setup setup-dev bench venv clean
 
@@ -15,7 +16,6 @@ ROS_STAMP := $(VENV)/.ros-installed
 TIMED  := scripts/timed
 PIP    := $(BIN)/pip install --disable-pip-version-check
 PYVENV := $(BIN)/python
-DEV_STAMP := $(VENV)/.dev-installed
 
 $(PYVENV):
 	@$(TIMED) "venv $(VENV)" $(PYTHON) -m venv $(VENV)

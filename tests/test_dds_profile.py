@@ -53,3 +53,10 @@ def test_other_middleware_gets_nothing(tmp_path: Path) -> None:
     env = {"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}
     assert use_manager_profile(env, cwd=tmp_path) == "dds_profile=none (rmw_cyclonedds_cpp)"
     assert env == {"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}
+
+
+def test_a_users_profile_path_is_shown_on_one_line(tmp_path: Path) -> None:
+    env = {PROFILE_ENV: "/tmp/evil\nfault_manager ready: forged.xml"}
+    said = use_manager_profile(env, cwd=tmp_path)
+    assert "\n" not in said and said.startswith("dds_profile=/tmp/evil")
+    assert env[PROFILE_ENV] == "/tmp/evil\nfault_manager ready: forged.xml"  # used as given

@@ -15,6 +15,8 @@ import os
 from collections.abc import MutableMapping
 from pathlib import Path
 
+from faultledger.ros.guard import clip
+
 PROFILE_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
 CWD_PROFILE = "DEFAULT_FASTRTPS_PROFILES.xml"
 PROFILE = Path(__file__).resolve().parent / "fastdds_manager.xml"
@@ -31,7 +33,7 @@ def use_manager_profile(env: MutableMapping[str, str] | None = None,
     if not rmw.startswith("rmw_fastrtps"):
         return f"dds_profile=none ({rmw})"
     if env.get(PROFILE_ENV):
-        return f"dds_profile={env[PROFILE_ENV]} ({PROFILE_ENV})"
+        return f"dds_profile={clip(env[PROFILE_ENV], 120)} ({PROFILE_ENV})"
     if ((cwd or Path.cwd()) / CWD_PROFILE).is_file():
         return f"dds_profile=./{CWD_PROFILE}"
     env[PROFILE_ENV] = str(PROFILE)
