@@ -104,7 +104,8 @@ DISCOVERY_WAIT_SEC = 2.0
 """How long ``serve`` watches the ROS graph for another manager before serving.
 
 Another ``serve`` announces itself every 0.5 s (dds_profile.py), so it shows up 4 times in this
-window: measured on 2 cores, its ``report_fault`` appeared 0-0.6 s after our node was created.
+window: measured on 2 cores, its ``report_fault`` appeared 0-0.43 s after our node was created
+(12 starts).
 A manager on Fast DDS's defaults announces every 3 s and is seen only if it announces within
 the window (about 2 starts in 3); docs/ros.md "A second fault manager". The former 5 s,
 sized for 3 s announcements, made every start of ``make run`` wait that long.
