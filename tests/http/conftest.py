@@ -2,12 +2,15 @@
 
 ``http_server(config=..., db=...)`` starts one and returns a ``Server`` with its base URL, an
 ``httpx.Client`` and the database file; every server still running at the end is stopped.
+``browser`` is one headless Chromium (Debian's chromium + chromium-driver) for the session;
+tests that use it are marked ``needs_browser`` and save screenshots in ``SHOTS``.
 """
 
 from __future__ import annotations
 
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -15,10 +18,18 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
 import yaml
+
+CHROMIUM = shutil.which("chromium")
+DRIVER = shutil.which("chromedriver")
+SHOTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "screenshots"
+"""Screenshots for a person to look at (git ignores test-artifacts/; never the user's var/)."""
+needs_browser = pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
+                                   reason="needs Debian's chromium and chromium-driver")
 
 READY = re.compile(r"faultledger http ready.*?: (http://[0-9.:\[\]]+/)")
 
@@ -94,3 +105,23 @@ def http_server(tmp_path: Path) -> Iterator[Callable[..., Server]]:
     yield _start
     for server in started:
         server.stop()
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Any]:
+    """One headless Chromium for the whole session (a selenium WebDriver)."""
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.options import Options
+    from selenium.webdriver.chrome.service import Service
+
+    if CHROMIUM is None or DRIVER is None:
+        pytest.skip("needs Debian's chromium and chromium-driver")
+    options = Options()
+    options.binary_location = CHROMIUM
+    for argument in ("--headless=new", "--no-sandbox", "--disable-gpu",
+                     "--disable-dev-shm-usage", "--window-size=1366,900"):
+        options.add_argument(argument)
+    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    yield driver
+    driver.quit()

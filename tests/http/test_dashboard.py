@@ -1,45 +1,25 @@
 """The dashboard in a real headless Chromium (Debian's chromium + chromium-driver): live
 updates without reload, clearing with an operator token, a viewer refused, the statistics and
-history views. Screenshots of every view land in var/screenshots/ (look at them)."""
+history views. Screenshots of every view land in
+test-artifacts/screenshots/ (look at them)."""
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from tests.http.conftest import Server, start_server, write_config
+from tests.http.conftest import SHOTS, Server, needs_browser, start_server, write_config
 
 webdriver = pytest.importorskip("selenium.webdriver")
-from selenium.webdriver.chrome.options import Options  # noqa: E402
-from selenium.webdriver.chrome.service import Service  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
 from selenium.webdriver.remote.webdriver import WebDriver  # noqa: E402
 from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
 
-CHROMIUM = shutil.which("chromium")
-DRIVER = shutil.which("chromedriver")
-SHOTS = Path(__file__).resolve().parents[2] / "var" / "screenshots"
-pytestmark = pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
-                                reason="needs Debian's chromium and chromium-driver")
-
-
-@pytest.fixture(scope="session")
-def browser() -> Iterator[WebDriver]:
-    options = Options()
-    options.binary_location = CHROMIUM or ""
-    for argument in ("--headless=new", "--no-sandbox", "--disable-gpu",
-                     "--disable-dev-shm-usage", "--window-size=1366,900"):
-        options.add_argument(argument)
-    driver = webdriver.Chrome(service=Service(DRIVER or ""), options=options)
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    yield driver
-    driver.quit()
+pytestmark = needs_browser
 
 
 def report(db: Path, code: str, event_type: str = "FAILED", severity: str = "3",
