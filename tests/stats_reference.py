@@ -41,7 +41,9 @@ COUNTS = ("failed_reports", "passed_reports", "activations", "occurrences", "con
           "heals", "clears")
 GOAL_COUNTS = {"ABORTED": "aborted_goals", "CANCELED": "canceled_goals",
                "SUCCEEDED": "succeeded_goals"}
-FIGURES = (*COUNTS, "active_seconds", "repairs", "mttr_seconds", "mtbf_seconds",
+ESTOP_GLOB = "HW_*_EMERGENCY_STOP"
+"""The default ``estop_codes``."""
+FIGURES = (*COUNTS, "estops", "active_seconds", "repairs", "mttr_seconds", "mtbf_seconds",
            "confirmations_per_10min", "flood_windows", "flood_seconds", "flood_percent",
            "chattering_codes", "stale_codes", "top10_share", *GOAL_COUNTS.values())
 
@@ -302,6 +304,8 @@ def figures(period: RefPeriod, facts: Sequence[Fact], episodes: Sequence[Episode
         "confirmations": sum(f.confirmation for f in inside),
         "heals": sum(f.heal for f in inside),
         "clears": sum(f.clear for f in inside),
+        "estops": sum(f.activation for f in inside
+                      if fnmatch.fnmatchcase(f.code, ESTOP_GLOB)),
     }
     confirmations = row["confirmations"]
 

@@ -16,6 +16,7 @@ import pytest
 from faultledger import FaultLedger, Policy
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import StatsRow
+from faultledger.errors import InvalidInputError
 
 BERLIN = ZoneInfo("Europe/Berlin")
 CALENDAR = ShiftCalendar.model_validate({
@@ -129,13 +130,13 @@ def test_with_healing_each_press_is_one_activation_confirmation_heal_and_repair(
     night_held = [held for _, held, _ in NIGHT_PRESSES]
     morning_held = [held for _, held, _ in MORNING_PRESSES]
     assert figures(night) == approx_figures({
-        **COMMON, "failed_reports": 5, "passed_reports": 5, "activations": 5,
+        **COMMON, "failed_reports": 5, "passed_reports": 5, "activations": 5, "estops": 5,
         "occurrences": 1, "confirmations": 5, "heals": 5, "clears": 0,
         "active_seconds": sum(night_held), "repairs": 5,
         "mttr_seconds": sum(night_held) / 5, "mtbf_seconds": SHIFT_SECONDS / 5,
         "confirmations_per_10min": 5 / 48})
     assert figures(morning) == approx_figures({
-        **COMMON, "failed_reports": 2, "passed_reports": 2, "activations": 2,
+        **COMMON, "failed_reports": 2, "passed_reports": 2, "activations": 2, "estops": 2,
         "confirmations": 2, "heals": 2, "clears": 0,
         "active_seconds": sum(morning_held), "repairs": 2,
         "mttr_seconds": sum(morning_held) / 2, "mtbf_seconds": SHIFT_SECONDS / 2,
@@ -165,13 +166,13 @@ def test_without_healing_the_stop_stays_confirmed_but_every_press_is_an_activati
     night, morning = shift_stats(ledger)
     episode = (cleared_at - NIGHT_PRESSES[0][0]).total_seconds()
     assert figures(night) == approx_figures({
-        **COMMON, "failed_reports": 5, "passed_reports": 5, "activations": 5,
+        **COMMON, "failed_reports": 5, "passed_reports": 5, "activations": 5, "estops": 5,
         "occurrences": 1, "confirmations": 1, "heals": 0, "clears": 1,
         "active_seconds": episode, "repairs": 1, "mttr_seconds": episode,
         "mtbf_seconds": SHIFT_SECONDS, "confirmations_per_10min": 1 / 48})
     # Reopened at 06:00 sharp by the first morning press; still open at AS_OF (13:00).
     assert figures(morning) == approx_figures({
-        **COMMON, "failed_reports": 2, "passed_reports": 2, "activations": 2,
+        **COMMON, "failed_reports": 2, "passed_reports": 2, "activations": 2, "estops": 2,
         "occurrences": 1, "confirmations": 1, "heals": 0, "clears": 0,
         "active_seconds": 7 * 3600.0, "repairs": 0, "mttr_seconds": None,
         "mtbf_seconds": SHIFT_SECONDS, "confirmations_per_10min": 1 / 48})
@@ -189,6 +190,55 @@ def test_without_healing_and_without_a_clear_the_activations_are_still_five_and_
     first = NIGHT_PRESSES[0][0]
     assert night.active_seconds == pytest.approx((berlin(22, 6, 0) - first).total_seconds())
     assert morning.active_seconds == pytest.approx(7 * 3600.0)
+
+
+def all_codes(ledger: FaultLedger, **kwargs: object) -> list[StatsRow]:
+    return ledger.stats(by="shift", since=NIGHT, until=MORNING, calendar=CALENDAR,
+                        as_of=AS_OF, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("edge", [0, 1], ids=["whole-minutes", "partial-minutes"])
+def test_estops_count_only_the_estop_codes_among_all_activations(
+    opened: Callable[[Policy], FaultLedger], edge: int
+) -> None:
+    """Without a code filter (the per-minute sums path, and the facts path where a bound
+    cuts a minute) the rows count every activation, and e-stops only for the e-stop codes:
+    the noise codes (a RESET suffix, lower case, another fault) are activations, not e-stops."""
+    ledger = opened(HEALING)
+    noise(ledger)
+    for at, held, severity in NIGHT_PRESSES + MORNING_PRESSES:
+        press(ledger, at, held, severity)
+    since = berlin(21, 22, 0) + timedelta(seconds=edge)
+    night, morning = ledger.stats(by="shift", since=since, until=MORNING, calendar=CALENDAR,
+                                  as_of=AS_OF)
+    assert (night.estops, morning.estops) == (5, 2)
+    assert (night.activations, morning.activations) == (5 + 3, 2 + 3)
+    by_code = ledger.stats(by="shift", since=since, until=MORNING, calendar=CALENDAR,
+                           as_of=AS_OF, group_by=["code"])
+    assert {(r.period.id, r.group["code"]): r.estops for r in by_code if r.estops} == {
+        (NIGHT, ESTOP): 5, (MORNING, ESTOP): 2}
+    assert sum(r.estops for r in by_code) == 7
+
+
+def test_the_estop_codes_are_configurable(db_url: str) -> None:
+    """``estop_codes`` names what an e-stop is: here the plant's own code, not the bridge's."""
+    with FaultLedger.open(db_url, policy=HEALING, background=False,
+                          estop_codes=["PLC_*_ESTOP", "LIDAR_TIMEOUT"]) as ledger:
+        noise(ledger)
+        for at, held, severity in NIGHT_PRESSES:
+            press(ledger, at, held, severity)
+        assert ledger.report("PLC_CELL3_ESTOP", "FAILED", 3, "", "/plc",
+                             at=berlin(21, 23, 5)).accepted
+        night, morning = all_codes(ledger)
+        # night: the PLC stop and LIDAR_TIMEOUT's first FAILED; morning: LIDAR_TIMEOUT again
+        # after its PASSED at 07:00 (noise()). The bridge's HW_ARM1_EMERGENCY_STOP is none.
+        assert (night.estops, morning.estops) == (2, 1)
+
+
+@pytest.mark.parametrize("bad", [[], [""], "HW_*"])
+def test_bad_estop_codes_are_refused(db_url: str, bad: object) -> None:
+    with pytest.raises(InvalidInputError):
+        FaultLedger.open(db_url, estop_codes=bad)  # type: ignore[arg-type]
 
 
 SHIFTS_YAML = """\
@@ -222,6 +272,7 @@ def test_the_cli_prints_e_stops_per_shift_as_json(db_url: str, tmp_path: Path) -
     assert [(r["period"], r["period_name"], r["production_day"]) for r in rows] == [
         (NIGHT, "night", "2026-11-21"), (MORNING, "morning", "2026-11-22")]
     assert [r["activations"] for r in rows] == [5, 2]
+    assert [r["estops"] for r in rows] == [5, 2]
     assert [r["failed_reports"] for r in rows] == [5, 2]
     assert [r["confirmations"] for r in rows] == [5, 2]
     assert [r["heals"] for r in rows] == [5, 2]

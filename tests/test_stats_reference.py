@@ -43,7 +43,8 @@ two, a DST switch in Berlin (a 7 h / 9 h night, a 23 h / 25 h day, a repeated ho
 US = 1_000_000
 HOUR_US = 3600 * US
 
-CODES = ("HW_ARM_STOP", "HW_BASE_STOP", "LIDAR_TIMEOUT", "MOTOR_OVERHEAT")
+CODES = ("HW_ARM_EMERGENCY_STOP", "HW_BASE_STOP", "LIDAR_TIMEOUT", "MOTOR_OVERHEAT")
+"""One e-stop code of the default ``estop_codes`` among others."""
 SOURCES = ("/arm", "/base", "/sensors/lidar")
 ACTORS = ("cli:alice", "cli:bob")
 ACTIONS = ("/nav/navigate_to_pose", "/arm/pick", "/dock")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from bisect import bisect_left, bisect_right
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,6 +31,12 @@ _GOAL_INDEX = {status: GOAL_METRICS.index(metric) for status, metric in GOAL_MET
 GroupKey = tuple[tuple[str, Any], ...]
 Span = tuple[str, int, int | None]
 """(code, start_ns, end_ns or None while open)."""
+IsEstop = Callable[[str], bool]
+"""Whether a fault code is an e-stop (the config's ``estop_codes``)."""
+
+
+def _never(_code: str) -> bool:
+    return False
 
 
 @dataclass(slots=True)
@@ -38,6 +44,7 @@ class _Tally:
     counts: list[int] = field(default_factory=lambda: [0] * len(_FLAGS))
     goals: list[int] = field(default_factory=lambda: [0] * len(GOAL_METRICS))
     """Goal outcomes per status, in GOAL_METRICS order."""
+    estops: int = 0
     active_ns: int = 0
     repairs: int = 0
     repair_ns: int = 0
@@ -56,10 +63,12 @@ class _Tally:
         return not (any(self.counts) or any(self.goals) or self.active_ns or self.repairs
                     or self.chattering or self.stale)
 
-    def add_fact(self, fact: StatFact) -> None:
+    def add_fact(self, fact: StatFact, is_estop: IsEstop) -> None:
         flags = (fact.failed, fact.passed, fact.activation, fact.occurrence, fact.confirmation,
                  fact.heal, fact.clear)
         self.counts = [a + b for a, b in zip(self.counts, flags, strict=True)]
+        if fact.activation and is_estop(fact.code):
+            self.estops += 1
         if fact.confirmation:
             self.windows[fact.at_ns // FLOOD_WINDOW_NS] += 1
             self.by_code[fact.code] += 1
@@ -118,9 +127,10 @@ def _add_episode(tally: _Tally, bounds: _Bounds, i: int, episode: Episode, end: 
 
 def from_facts(periods: Sequence[Period], facts: Iterable[StatFact],
                episodes: Iterable[Episode], as_of_ns: int,
-               group_by: Sequence[str] = (), goals: Iterable[GoalFact] = ()) -> list[StatsRow]:
+               group_by: Sequence[str] = (), goals: Iterable[GoalFact] = (),
+               is_estop: IsEstop = _never) -> list[StatsRow]:
     """Rows from individual facts and episodes (already filtered to the selected codes) and
-    goal outcomes.
+    goal outcomes; ``is_estop`` picks the activations counted as e-stops.
 
     Fault figures and goal figures have different keys: with ``action`` in ``group_by``
     the rows are per action and count goals only (a fault has no action); grouped by fault
@@ -147,7 +157,8 @@ def from_facts(periods: Sequence[Period], facts: Iterable[StatFact],
         i = bounds.index(fact.at_ns)
         if i is None:
             continue
-        tally_for(i, _key(group_by, fact.code, fact.source, fact.severity)).add_fact(fact)
+        tally_for(i, _key(group_by, fact.code, fact.source, fact.severity)).add_fact(
+            fact, is_estop)
     for goal in goals:
         i = bounds.index(goal.at_ns)
         if i is not None:
@@ -199,6 +210,9 @@ class PeriodSums:
     partial_goals: Sequence[GoalFact] = ()
     partial_episodes: Sequence[Episode] = ()
     """Episodes starting, or ending by a record, in ``partial`` (each once)."""
+    estops_at: Sequence[int] = ()
+    """When each e-stop activation of the range happened (ns): e-stops are rare, so they are
+    read one by one rather than summed per minute."""
 
 
 def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> list[StatsRow]:
@@ -224,6 +238,10 @@ def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> lis
         tally.repair_ns = row[15]
         tally.goals = list(row[16:19])
     _add_partial(tallies, edges, bounds, data)
+    for at_ns in data.estops_at:
+        found = bounds.index(at_ns)
+        if found is not None:
+            tallies[found].estops += 1
     first = bounds.starts[0]
     open_now = data.closed_open_at_start
     for _, start, _ in data.open_spans:
@@ -261,8 +279,8 @@ def _add_partial(tallies: list[_Tally], edges: list[list[int]], bounds: _Bounds,
 
     for fact in data.partial_facts:
         i = bounds.index(fact.at_ns)
-        if i is not None:  # (top codes and chattering come from the store for every path)
-            tallies[i].add_fact(fact)
+        if i is not None:  # (top codes, chattering and e-stops come from the store for
+            tallies[i].add_fact(fact, _never)  # every path: see PeriodSums)
     for goal in data.partial_goals:
         i = bounds.index(goal.at_ns)
         if i is not None:
@@ -341,6 +359,7 @@ def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
         period=period,
         group=group,
         **counts,
+        estops=tally.estops,
         active_seconds=tally.active_ns / NS_PER_SECOND,
         repairs=tally.repairs,
         mttr_seconds=tally.repair_ns / tally.repairs / NS_PER_SECOND if tally.repairs else None,

@@ -13,6 +13,10 @@ it combines with ``source`` (the action server's node) only."""
 FAULT_KEYS = ("code", "severity")
 """Group keys only faults have; ``action`` only goal outcomes have."""
 
+DEFAULT_ESTOP_CODES = ("HW_*_EMERGENCY_STOP",)
+"""What an e-stop is unless the config's ``estop_codes`` says otherwise: the codes the
+hardware status bridge raises for an emergency stop (docs/bridges/hardware_status.md)."""
+
 COUNT_METRICS = ("failed_reports", "passed_reports", "activations", "occurrences",
                  "confirmations", "heals", "clears")
 GOAL_METRICS = ("aborted_goals", "canceled_goals", "succeeded_goals")
@@ -33,6 +37,8 @@ class StatsRow:
     failed_reports: int = 0
     passed_reports: int = 0
     activations: int = 0
+    estops: int = 0
+    """Activations of the e-stop codes (``estop_codes``): e-stop presses."""
     occurrences: int = 0
     confirmations: int = 0
     heals: int = 0

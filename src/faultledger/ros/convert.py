@@ -30,8 +30,8 @@ up to 2262 (``clock.MAX_NS``); later ones are sent as this one (saturated, docs/
 UINT32_MAX = 2**32 - 1
 UINT64_MAX = 2**64 - 1
 STATS_FLOATS = ("active_seconds", "confirmations_per_10min", "flood_seconds", "flood_percent")
-STATS_COUNTS = (*COUNT_METRICS, "repairs", "flood_windows", "chattering_codes", "stale_codes",
-                *GOAL_METRICS)
+STATS_COUNTS = (*COUNT_METRICS, "estops", "repairs", "flood_windows", "chattering_codes",
+                "stale_codes", *GOAL_METRICS)
 STATS_OPTIONAL = ("mttr_seconds", "mtbf_seconds", "top10_share")
 """Figures that may be undefined (None): NaN in the message."""
 

@@ -7,6 +7,7 @@ Precedence, for every entry point alike (docs/configuration.md, "Precedence"):
 - policy: ROS parameters (serve) > the config file's ``policy`` > medkit's defaults; a
   command that only reads never records a policy (the log's own applies).
 - shift calendar: ``--shifts`` > the config file's ``shifts`` > the built-in UTC calendar.
+- e-stop codes: the config file's ``estop_codes`` > ``HW_*_EMERGENCY_STOP``.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 from faultledger.domain.periods import default_calendar
 from faultledger.domain.policy import Policy
 from faultledger.domain.shifts import ShiftCalendar
+from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES
 from faultledger.errors import ConfigError
 from faultledger.service.config import Settings, load_shift_calendar
 from faultledger.service.ledger import FaultLedger
@@ -53,6 +55,7 @@ class LedgerConfig:
     calendar: ShiftCalendar
     max_batch: int
     role: Role
+    estop_codes: tuple[str, ...] = DEFAULT_ESTOP_CODES
 
 
 def database_url(text: str) -> str:
@@ -105,7 +108,8 @@ def resolve(settings: Settings, role: Role, *, db: str | None = None,
         chosen = None
     path = shifts or settings.shifts
     calendar = default_calendar() if path is None else load_shift_calendar(path)
-    return LedgerConfig(url, chosen, calendar, settings.database.max_batch, role)
+    return LedgerConfig(url, chosen, calendar, settings.database.max_batch, role,
+                        tuple(settings.estop_codes))
 
 
 def open_ledger(config: LedgerConfig) -> FaultLedger:
@@ -113,4 +117,5 @@ def open_ledger(config: LedgerConfig) -> FaultLedger:
     writes = config.role is not Role.READER
     return FaultLedger.open(config.url, policy=config.policy, max_batch=config.max_batch,
                             create=writes, upgrade=writes,
-                            background=config.role is Role.SERVER, calendar=config.calendar)
+                            background=config.role is Role.SERVER, calendar=config.calendar,
+                            estop_codes=config.estop_codes)

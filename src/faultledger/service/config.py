@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from faultledger.domain.policy import Policy
 from faultledger.domain.shifts import ShiftCalendar
+from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES
 from faultledger.errors import ConfigError
 
 DEFAULT_DATABASE_URL = "sqlite:///var/faultledger.db"
@@ -83,6 +84,10 @@ class Settings(BaseModel):
     shifts: Path | None = None
     """Shift calendar YAML (see config/shifts.yaml) for statistics, relative to the working
     directory; None: the built-in default calendar (UTC, three 8-hour shifts)."""
+    estop_codes: list[Annotated[str, Field(min_length=1, max_length=256)]] = Field(
+        default_factory=lambda: list(DEFAULT_ESTOP_CODES), min_length=1, max_length=256)
+    """Globs (case-sensitive) of the codes that are emergency stops: their activations are
+    the ``estops`` figure every statistics row, report and the dashboard headline."""
     anchors: AnchorSettings = Field(default_factory=AnchorSettings)
     http: HttpSettings = Field(default_factory=HttpSettings)
 

@@ -7,7 +7,7 @@ import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from types import TracebackType
 
@@ -29,7 +29,7 @@ from faultledger.domain.periods import default_calendar
 from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Projector, Transition
 from faultledger.domain.shifts import ShiftCalendar
-from faultledger.domain.stat_rows import StatsRow
+from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES, StatsRow
 from faultledger.domain.statistics import StatsFold
 from faultledger.errors import (
     DamagedDatabaseError,
@@ -101,6 +101,8 @@ class FaultLedger:
         self.restored = restored
         self.calendar: ShiftCalendar = default_calendar()
         """The shift calendar ``stats`` uses unless a call names another."""
+        self.estop_codes: tuple[str, ...] = DEFAULT_ESTOP_CODES
+        """Globs of the codes whose activations are e-stops (the ``estops`` figure)."""
         self._stop = threading.Event()
         self._ticker: threading.Thread | None = None
 
@@ -108,7 +110,8 @@ class FaultLedger:
     @classmethod
     def open(cls, url: str, policy: Policy | None = None, *, max_batch: int = 512,
              upgrade: bool = True, create: bool = True, background: bool | None = None,
-             calendar: ShiftCalendar | None = None) -> FaultLedger:
+             calendar: ShiftCalendar | None = None,
+             estop_codes: Sequence[str] | None = None) -> FaultLedger:
         """Open (create, migrate) the database and restore state: projections + log tail.
 
         With a ``policy`` this process is a serving writer: the policy is recorded when it
@@ -134,6 +137,8 @@ class FaultLedger:
         ledger = cls(db, projector, policy, max_batch, restored)
         if calendar is not None:
             ledger.calendar = calendar
+        if estop_codes is not None:
+            ledger.estop_codes = statistics.estop_globs(estop_codes)
         try:
             if policy is not None:
                 ledger._writer.submit(RecordPolicy())
@@ -320,7 +325,7 @@ class FaultLedger:
         shift ids; ``as_of`` (default now) ends the CONFIRMED episodes still open.
         """
         query = statistics.StatsQuery(by, since, until, codes, group_by,
-                                      calendar or self.calendar, as_of)
+                                      calendar or self.calendar, as_of, self.estop_codes)
         return statistics.compute(self._db, query)
 
     def downtimes(self, since: datetime, until: datetime, limit: int | None = None, *,
@@ -633,16 +638,28 @@ def export_history(ledger: FaultLedger, code: str | None = None,
                    since: datetime | int | None = None, until: datetime | int | None = None,
                    source: str | None = None, kinds: Iterable[str] = (),
                    limit: int | None = None, *, codes: Sequence[str] | None = None,
-                   from_seq: int | None = None, to_seq: int | None = None
-                   ) -> Iterator[event_log.StoredRecord]:
-    """``history``'s selection as stored rows with their predecessor's hash, streamed.
+                   from_seq: int | None = None, to_seq: int | None = None,
+                   descending: bool = False) -> Iterator[event_log.StoredRecord]:
+    """``history``'s selection as stored rows with their predecessor's hash, streamed
+    (``descending``: newest first, and ``limit`` keeps the newest).
 
     For exports of any size: rows are fetched in chunks inside one read transaction while the
     caller consumes them (a consistent snapshot). The filter is checked here, before the
     first row, so bad input fails before anything is written.
     """
     where = _record_filter(code, since, until, source, kinds, limit, codes, from_seq, to_seq)
-    return _stored_rows(ledger._db, where)
+    return _stored_rows(ledger._db, replace(where, descending=descending))
+
+
+def count_history(ledger: FaultLedger, code: str | None = None,
+                  since: datetime | int | None = None, until: datetime | int | None = None,
+                  source: str | None = None, kinds: Iterable[str] = (), *,
+                  codes: Sequence[str] | None = None, from_seq: int | None = None,
+                  to_seq: int | None = None) -> int:
+    """How many records ``history`` selects with these filters (no limit)."""
+    where = _record_filter(code, since, until, source, kinds, None, codes, from_seq, to_seq)
+    with ledger._db.reading() as conn:
+        return event_log.count_matching(conn, where)
 
 
 def _stored_rows(db: Database, where: event_log.RecordFilter

@@ -13,7 +13,7 @@ from faultledger.domain import stat_compute, validation
 from faultledger.domain.clock import MAX_TIME, MIN_TIME, NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.periods import PERIOD_KINDS, parse_bound, periods
 from faultledger.domain.shifts import Period, ShiftCalendar
-from faultledger.domain.stat_rows import FAULT_KEYS, GROUP_KEYS, StatsRow
+from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES, FAULT_KEYS, GROUP_KEYS, StatsRow
 from faultledger.domain.statistics import Episode
 from faultledger.errors import InvalidInputError
 from faultledger.store import stat_tables
@@ -45,12 +45,14 @@ class StatsQuery:
 
     def __init__(self, by: str, since: datetime | str | None, until: datetime | str | None,
                  codes: Sequence[str] | None, group_by: Sequence[str],
-                 calendar: ShiftCalendar, as_of: datetime | None) -> None:
+                 calendar: ShiftCalendar, as_of: datetime | None,
+                 estop_codes: Sequence[str] = DEFAULT_ESTOP_CODES) -> None:
         if not isinstance(by, str) or by not in PERIOD_KINDS:
             raise InvalidInputError(f"by must be one of {', '.join(PERIOD_KINDS)}, got "
                                     f"{validation.shown(by)}")
         self.group_by = _group_by(group_by)
         self.codes = _codes(codes)
+        self.estop_codes = tuple(estop_codes)
         if as_of is None:
             self.as_of_ns = time.time_ns()
         else:
@@ -73,6 +75,9 @@ class StatsQuery:
 
     def selects(self, code: str) -> bool:
         return self.codes is None or any(fnmatchcase(code, glob) for glob in self.codes)
+
+    def is_estop(self, code: str) -> bool:
+        return any(fnmatchcase(code, glob) for glob in self.estop_codes)
 
     def inner_minute_aligned(self) -> bool:
         """Every period edge but ``since`` and ``until`` lies on a whole minute (the minute
@@ -130,6 +135,15 @@ def _codes(codes: Sequence[str] | None) -> tuple[str, ...] | None:
     return tuple(codes)
 
 
+def estop_globs(codes: Sequence[str]) -> tuple[str, ...]:
+    """The e-stop code globs, checked like a query's ``codes`` (at least one)."""
+    checked = _codes(codes)
+    if not checked:
+        raise InvalidInputError("estop_codes needs at least one glob pattern "
+                                f"(default {', '.join(DEFAULT_ESTOP_CODES)})")
+    return checked
+
+
 def _check_time(moment: object, name: str) -> None:
     problem = validation.time_error(name, moment)
     if problem:
@@ -172,7 +186,7 @@ def compute(db: Database, query: StatsQuery) -> list[StatsRow]:
             facts = stat_tables.facts(conn, query.since_ns, query.until_ns, only)
             episodes = stat_tables.episodes(conn, query.since_ns, query.until_ns, only)
     return stat_compute.from_facts(query.periods, facts, episodes, query.as_of_ns,
-                                   query.group_by, goals)
+                                   query.group_by, goals, query.is_estop)
 
 
 def _whole_minutes(since_ns: int, until_ns: int) -> tuple[int, int, list[tuple[int, int]]]:
@@ -210,4 +224,7 @@ def _sums(conn: Connection, query: StatsQuery) -> stat_compute.PeriodSums:
                                           stat_compute.STALE_AFTER_NS),
         partial=partial, partial_facts=facts, partial_goals=goals,
         partial_episodes=list(episodes.values()),
+        estops_at=stat_tables.activation_times(
+            conn, query.since_ns, query.until_ns,
+            [code for code in stat_tables.codes(conn) if query.is_estop(code)]),
     )

@@ -288,6 +288,20 @@ def facts(conn: Connection, since_ns: int, until_ns: int,
     return found
 
 
+def activation_times(conn: Connection, since_ns: int, until_ns: int,
+                     only: Sequence[str]) -> list[int]:
+    """When the codes ``only`` had an activation in [since, until) (ns): the e-stops."""
+    window = and_(stat_facts.c.at_ns >= since_ns, stat_facts.c.at_ns < until_ns,
+                  stat_facts.c.activation == 1)
+    found: list[int] = []
+    for chunk in _chunks(only):
+        if chunk:
+            query = select(stat_facts.c.at_ns).where(window,
+                                                     stat_facts.c.fault_code.in_(chunk))
+            found.extend(row[0] for row in conn.execute(query))
+    return found
+
+
 def goals(conn: Connection, since_ns: int, until_ns: int) -> list[GoalFact]:
     """Goal outcomes in [since, until) (through ix_stat_goals_at)."""
     query = select(stat_goals).where(stat_goals.c.at_ns >= since_ns,
