@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fnmatch import fnmatchcase
 from typing import Any, NamedTuple
 
@@ -116,7 +116,8 @@ class RecordFilter:
 
     ``codes`` are exact codes or case-sensitive fnmatch globs (any of them matches);
     ``from_seq``/``to_seq`` are inclusive, ``since_ns``/``until_ns`` bound ``occurred_at``
-    as [since, until).
+    as [since, until). ``descending`` gives the newest first (``limit`` then keeps the
+    newest).
     """
 
     fault_code: str | None = None
@@ -128,6 +129,7 @@ class RecordFilter:
     codes: tuple[str, ...] = ()
     from_seq: int | None = None
     to_seq: int | None = None
+    descending: bool = False
 
 
 def find(conn: Connection, where: RecordFilter) -> list[LogRecord]:
@@ -189,9 +191,20 @@ def _stream(conn: Connection, query: Select[Any]) -> Iterator[Sequence[Any]]:
         yield from chunk
 
 
-def _filtered(conn: Connection, query: Select[Any], where: RecordFilter) -> Select[Any] | None:
-    """``query`` restricted by ``where`` in seq order; None when no stored code can match."""
-    query = query.order_by(events.c.seq)
+def count_matching(conn: Connection, where: RecordFilter) -> int:
+    """How many records match ``where`` (its ``limit`` aside): an index count when a code,
+    seq range or time bounds it, a pass over the log otherwise."""
+    query = _filtered(conn, select(func.count()).select_from(events),
+                      replace(where, limit=None), ordered=False)
+    return 0 if query is None else int(conn.execute(query).scalar() or 0)
+
+
+def _filtered(conn: Connection, query: Select[Any], where: RecordFilter, *,
+              ordered: bool = True) -> Select[Any] | None:
+    """``query`` restricted by ``where`` in seq order (newest first when ``descending``);
+    None when no stored code can match."""
+    if ordered:
+        query = query.order_by(events.c.seq.desc() if where.descending else events.c.seq)
     if where.fault_code is not None:
         query = query.where(events.c.fault_code == where.fault_code)
     if where.codes:

@@ -1,5 +1,6 @@
-"""``GET /api/v1/history`` (the audit log, paged by seq, JSON / CSV / JSON Lines with hashes)
-and ``GET /api/v1/state-at`` (time travel): the CLI's `history` and `state-at` over HTTP."""
+"""``GET /api/v1/history`` (the audit log, paged by seq either way, JSON / CSV / JSON Lines
+with hashes) and ``GET /api/v1/state-at`` (time travel): the CLI's `history` and `state-at`
+over HTTP."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from faultledger.http import medkit
 from faultledger.http.context import Context
 from faultledger.service import times
 from faultledger.service.exports import export_row, write_csv, write_jsonl
-from faultledger.service.ledger import export_history, seq_recorded_by
+from faultledger.service.ledger import count_history, export_history, seq_recorded_by
 from faultledger.service.tokens import Permission, Principal
 from faultledger.store.event_log import StoredRecord
 
@@ -30,6 +31,11 @@ class Format(StrEnum):
     json = "json"
     csv = "csv"
     jsonl = "jsonl"
+
+
+class Order(StrEnum):
+    asc = "asc"
+    desc = "desc"
 
 
 def _chunks(rows: Iterator[StoredRecord], write: Any) -> Iterator[str]:
@@ -56,7 +62,7 @@ def router(context: Context) -> APIRouter:
     ledger = context.ledger
     read = Depends(context.auth.need(Permission.READ))
 
-    @api.get("/history", summary="Log records in seq order (the audit trail), paged by seq",
+    @api.get("/history", summary="Log records (the audit trail), paged by seq either way",
              response_model=None)
     def history(
         code: Annotated[list[str] | None, Query(
@@ -70,6 +76,15 @@ def router(context: Context) -> APIRouter:
         from_seq: Annotated[int | None, Query(ge=1)] = None,
         to_seq: Annotated[int | None, Query(ge=1)] = None,
         after_seq: Annotated[int, Query(ge=0, description="page: records after this seq")] = 0,
+        before_seq: Annotated[int | None, Query(
+            ge=1, description="page: records before this seq (with order=desc: the "
+            "next_before_seq of the page before)")] = None,
+        order: Annotated[Order, Query(
+            description="json: asc (oldest first, the default) or desc (newest first)")
+        ] = Order.asc,
+        total: Annotated[bool, Query(
+            description="json: add the number of records the filters match (every page)")
+        ] = False,
         limit: Annotated[int | None, Query(ge=1, le=MOST, description=(
             f"records per page (json: default {PAGE}); csv/jsonl: all when not given"))] = None,
         format: Format = Format.json,
@@ -79,25 +94,40 @@ def router(context: Context) -> APIRouter:
         if from_seq is not None and to_seq is not None and from_seq > to_seq:
             raise InvalidInputError(f"from_seq {from_seq} is after to_seq {to_seq}: the range "
                                     "is empty")
-        first_seq = max(from_seq or 1, after_seq + 1)
-        past_end = to_seq is not None and first_seq > to_seq  # paged past to_seq
+        if format is not Format.json and (order is Order.desc or total):
+            raise InvalidInputError(f"order=desc and total are for JSON pages; a {format} "
+                                    "export is every record in seq order")
         filters: dict[str, Any] = {
             "codes": code or None, "source": source, "kinds": kind or (),
             "since": times.parse_time(since, "since", calendar),
             "until": times.parse_time(until, "until", calendar, upper=True),
-            "from_seq": first_seq, "to_seq": to_seq,
+            "from_seq": from_seq, "to_seq": to_seq,
         }
+        # The page cursors narrow the seq range: after_seq from below, before_seq from above.
+        first_seq = max(from_seq or 1, after_seq + 1)
+        last_seq = (to_seq if before_seq is None
+                    else before_seq - 1 if to_seq is None else min(to_seq, before_seq - 1))
+        empty = last_seq is not None and first_seq > last_seq  # paged past an end
+        paged = {**filters, "from_seq": first_seq, "to_seq": last_seq}
 
         def select(most: int | None) -> Iterator[StoredRecord]:
-            return iter(()) if past_end else export_history(ledger, limit=most, **filters)
+            return iter(()) if empty else export_history(
+                ledger, limit=most, descending=order is Order.desc, **paged)
 
         if format is Format.json:
             page = limit or PAGE
             rows = list(select(page + 1))
             more = len(rows) > page
             items = [export_row(row) for row in rows[:page]]
-            return {"items": items,
-                    "next_after_seq": items[-1]["seq"] if more and items else None}
+            cursor = items[-1]["seq"] if more and items else None
+            answer: dict[str, Any] = {"items": items}
+            if order is Order.desc:
+                answer["next_before_seq"] = cursor
+            else:
+                answer["next_after_seq"] = cursor
+            if total:
+                answer["total"] = count_history(ledger, **filters)
+            return answer
         rows_iter = select(limit)
         first_row = next(rows_iter, None)  # bad filters fail here, before any byte is sent
 
