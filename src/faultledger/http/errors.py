@@ -47,27 +47,31 @@ class ApiError(Exception):
     """An answer other than success, raised anywhere in a route."""
 
     def __init__(self, reason: str, message: str, headers: dict[str, str] | None = None,
-                 parameters: dict[str, Any] | None = None) -> None:
+                 parameters: dict[str, Any] | None = None, error_code: str | None = None
+                 ) -> None:
         super().__init__(message)
         self.reason = Reason(reason)
         self.message = message
         self.headers = headers
         self.parameters = parameters
+        self.error_code = error_code
+        """medkit's own code where it is more precise than the reason's (entity-not-found)."""
 
 
-def body(reason: str, message: str, parameters: dict[str, Any] | None = None
-         ) -> dict[str, Any]:
+def body(reason: str, message: str, parameters: dict[str, Any] | None = None,
+         error_code: str | None = None) -> dict[str, Any]:
     found: dict[str, Any] = {"reason": str(reason), "message": message,
-                             "error_code": MEDKIT_CODES.get(reason, str(reason))}
+                             "error_code": error_code or MEDKIT_CODES.get(reason, str(reason))}
     if parameters:
         found["parameters"] = parameters
     return found
 
 
 def response(reason: str, message: str, headers: dict[str, str] | None = None,
-             parameters: dict[str, Any] | None = None) -> JSONResponse:
-    return JSONResponse(body(reason, message, parameters), status_code=STATUS.get(reason, 500),
-                        headers=headers)
+             parameters: dict[str, Any] | None = None, error_code: str | None = None
+             ) -> JSONResponse:
+    return JSONResponse(body(reason, message, parameters, error_code),
+                        status_code=STATUS.get(reason, 500), headers=headers)
 
 
 def _validation_message(error: RequestValidationError) -> str:
@@ -87,7 +91,8 @@ def _validation_message(error: RequestValidationError) -> str:
 def install(app: FastAPI) -> None:
     @app.exception_handler(ApiError)
     async def api_error(_request: Request, error: ApiError) -> JSONResponse:
-        return response(error.reason, error.message, error.headers, error.parameters)
+        return response(error.reason, error.message, error.headers, error.parameters,
+                        error.error_code)
 
     @app.exception_handler(FaultLedgerError)
     async def ledger_error(_request: Request, error: FaultLedgerError) -> JSONResponse:

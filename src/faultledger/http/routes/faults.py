@@ -7,7 +7,7 @@ import json
 import threading
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from fastapi import APIRouter, Depends, Header, Path, Query, Request, Response
 from sse_starlette import EventSourceResponse, ServerSentEvent
 
 from faultledger.domain.fault import Fault
@@ -131,55 +131,106 @@ def router(context: Context) -> APIRouter:
     def clear_fault(fault_code: str, reason: str = "",
                     principal: Principal = clear_permission) -> Response:
         writable(context)
-        result = ledger.clear(fault_code, actor=principal.name, reason=reason)
-        if not result.success:
-            if result.reason == Reason.NOT_FOUND:
-                raise not_found(fault_code)
-            raise ApiError(result.reason, result.message)
+        clear_one(context, fault_code, principal, reason)
         return Response(status_code=204)
 
     @api.delete("/faults", status_code=204, summary="Clear every fault of a status group")
     def clear_faults(status: StatusQuery = None, reason: str = "",
                      principal: Principal = clear_permission) -> Response:
         writable(context)
-        wanted = statuses(status)
-        for fault in ledger.all_faults():
-            if fault.status in wanted and fault.status is not FaultStatus.CLEARED:
-                result = ledger.clear(fault.fault_code, actor=principal.name, reason=reason)
-                if not result.success and result.reason != Reason.NOT_FOUND:
-                    raise ApiError(result.reason, result.message)
+        clear_group(context, ledger.all_faults(), statuses(status), principal, reason)
         return Response(status_code=204, headers={"X-Medkit-Local-Only": "true"})
 
     for kind in ENTITY_TYPES:
-        _entity_routes(api, context, kind, read)
+        _entity_routes(api, context, kind, read, clear_permission)
     return api
 
 
-def _entity_routes(api: APIRouter, context: Context, kind: str, read: Any) -> None:
+def clear_one(context: Context, fault_code: str, principal: Principal, reason: str) -> None:
+    """A clear recorded with the token's name as actor; an unknown fault is 404."""
+    result = context.ledger.clear(fault_code, actor=principal.name, reason=reason)
+    if not result.success:
+        if result.reason == Reason.NOT_FOUND:
+            raise not_found(fault_code)
+        raise ApiError(result.reason, result.message)
+
+
+def clear_group(context: Context, faults: list[Fault], wanted: tuple[FaultStatus, ...],
+                principal: Principal, reason: str) -> None:
+    """Clear each of ``faults`` in a ``wanted`` status (a CLEARED one is left as it is)."""
+    for fault in faults:
+        if fault.status in wanted and fault.status is not FaultStatus.CLEARED:
+            result = context.ledger.clear(fault.fault_code, actor=principal.name, reason=reason)
+            if not result.success and result.reason != Reason.NOT_FOUND:
+                raise ApiError(result.reason, result.message)
+
+
+def _entity_routes(api: APIRouter, context: Context, kind: str, read: Any,
+                   clear_permission: Any) -> None:
     """``/{apps,components,areas,functions}/{id}/faults[/{code}]``: the faults an entity
-    reported (a reporting source is the id or ends in ``/id``, as ``list_faults_for_entity``)."""
+    reported (a reporting source is the id or ends in ``/id``, as ``list_faults_for_entity``).
+    An entity no fault was ever reported by is unknown: 404 ``entity-not-found``, as the
+    gateway answers for an entity it has not discovered."""
     ledger = context.ledger
+    singular = kind.removesuffix("s")
+    id_field = f"{singular}_id"  # the gateway's path parameter and error parameter names
+    entity = Path(alias=id_field, description=f"The {singular}: a fault belongs to it when "
+                  "one of its reporting sources is the id or ends in /id")
+    title = singular.capitalize()
 
     def in_scope(entity_id: str) -> list[Fault]:
         found = ledger.lookup_entity(entity_id)
         if not found.success:
             raise ApiError(found.reason or Reason.INVALID, found.message,
                            parameters={"entity_id": entity_id})
+        if not found.faults:
+            raise ApiError(Reason.NOT_FOUND, "Entity not found", error_code="entity-not-found",
+                           parameters={"details": f"no fault was ever reported by a source "
+                                       f"named {entity_id!r} or ending in '/{entity_id}'",
+                                       "entity_id": entity_id})
         return found.faults
 
-    @api.get(f"/{kind}/{{entity_id}}/faults", summary=f"Faults of one of the {kind}")
-    def entity_faults(entity_id: str, status: StatusQuery = None, _: Principal = read
-                      ) -> dict[str, Any]:
+    def fault_of(entity_id: str, fault_code: str) -> Fault:
+        scope = in_scope(entity_id)
+        found = ledger.lookup_fault(fault_code)
+        if found.fault is None and found.reason != Reason.NOT_FOUND:
+            raise ApiError(found.reason or Reason.INVALID, found.message)
+        for fault in scope:
+            if fault.fault_code == fault_code:
+                return fault
+        raise ApiError(Reason.NOT_FOUND, f"Fault not found: {fault_code}",
+                       parameters={id_field: entity_id, "fault_code": fault_code})
+
+    @api.get(f"/{kind}/{{{id_field}}}/faults", summary=f"Faults of one of the {kind}",
+             operation_id=f"list{title}Faults")
+    def entity_faults(entity_id: str = entity, status: StatusQuery = None,
+                      _: Principal = read) -> dict[str, Any]:
         wanted = statuses(status)
-        faults = [f for f in in_scope(entity_id) if f.status in wanted]
-        answer = medkit.fault_list(faults)
+        answer = medkit.fault_list([f for f in in_scope(entity_id) if f.status in wanted])
         answer["x-medkit"]["entity_id"] = entity_id
         return answer
 
-    @api.get(f"/{kind}/{{entity_id}}/faults/{{fault_code}}",
-             summary=f"One fault of one of the {kind}")
-    def entity_fault(entity_id: str, fault_code: str, _: Principal = read) -> dict[str, Any]:
-        for fault in in_scope(entity_id):
-            if fault.fault_code == fault_code:
-                return medkit.fault_detail(fault)
-        raise not_found(fault_code)
+    @api.get(f"/{kind}/{{{id_field}}}/faults/{{fault_code}}",
+             summary=f"One fault of one of the {kind}", operation_id=f"get{title}Fault")
+    def entity_fault(fault_code: str, entity_id: str = entity, _: Principal = read
+                     ) -> dict[str, Any]:
+        return medkit.fault_detail(fault_of(entity_id, fault_code))
+
+    @api.delete(f"/{kind}/{{{id_field}}}/faults/{{fault_code}}", status_code=204,
+                summary=f"Clear one fault of one of the {kind}",
+                operation_id=f"clear{title}Fault")
+    def clear_entity_fault(fault_code: str, entity_id: str = entity, reason: str = "",
+                           principal: Principal = clear_permission) -> Response:
+        writable(context)
+        clear_one(context, fault_of(entity_id, fault_code).fault_code, principal, reason)
+        return Response(status_code=204)
+
+    @api.delete(f"/{kind}/{{{id_field}}}/faults", status_code=204,
+                summary=f"Clear the faults of one of the {kind} (default: PREFAILED and "
+                "CONFIRMED, as the gateway)", operation_id=f"clearAll{title}Faults")
+    def clear_entity_faults(entity_id: str = entity, status: StatusQuery = None,
+                            reason: str = "", principal: Principal = clear_permission
+                            ) -> Response:
+        writable(context)
+        clear_group(context, in_scope(entity_id), statuses(status), principal, reason)
+        return Response(status_code=204)
