@@ -24,6 +24,7 @@ from tests.cli_stats_scenario import (
     ARM1,
     AS_OF,
     AS_OF_TEXT,
+    GLOB,
     LIDAR,
     MOTOR,
     NIGHT,
@@ -92,7 +93,10 @@ def test_key_counts_are_compared_with_the_previous_night(scenario: Scenario) -> 
                                          NIGHT_END - timedelta(days=1))
     assert this.activations != before.activations
     figures = {row[0]: row[1:] for row in table(out, "key figures")}
-    for label, name in (("failed reports", "failed_reports"), ("activations", "activations"),
+    assert this.estops == presses(NIGHT_START, NIGHT_END, GLOB) > 0
+    assert this.estops < this.activations  # the lidar and the motor are no e-stops
+    for label, name in (("failed reports", "failed_reports"), ("e-stops", "estops"),
+                        ("activations (all faults)", "activations"),
                         ("confirmations", "confirmations"), ("heals", "heals")):
         now, then = getattr(this, name), getattr(before, name)
         assert figures[label] == [str(now), str(then), f"{now - then:+d}",
@@ -105,8 +109,8 @@ def test_key_counts_are_compared_with_the_previous_night(scenario: Scenario) -> 
     mttr_change = (this.mttr_seconds - before.mttr_seconds) / before.mttr_seconds * 100
     assert figures["MTTR"][3] == f"{mttr_change:+.1f} %"
     assert figures["MTBF"][:2] == [duration(this.mtbf_seconds), duration(before.mtbf_seconds)]
-    assert list(figures) == ["failed reports", "activations", "aborted goals",
-                             "confirmations", "heals", "clears", "fault time CONFIRMED (sum)",
+    assert list(figures) == ["e-stops", "aborted goals", "activations (all faults)",
+                             "failed reports", "confirmations", "heals", "clears", "fault time CONFIRMED (sum)",
                              "MTTR", "MTBF", "time in flood", "chattering codes", "stale codes"]
 
 
@@ -206,10 +210,10 @@ def test_a_shift_without_previous_instance_says_so(scenario: Scenario, tmp_path:
     result = invoke("report-shift", NIGHT, "--db", scenario.url, "--shifts", str(shifts),
                     "--as-of", AS_OF_TEXT)
     assert result.exit_code == 0, result.stderr
-    assert "compared with no previous instance" in result.stdout
+    assert "compared with no previous night shift" in result.stdout
     figures = {row[0]: row[1:] for row in table(result.stdout, "key figures")}
-    assert figures["activations"] == [str(shift_row(scenario, NIGHT).activations), "-", "-",
-                                      "-"]
+    assert figures["activations (all faults)"] == [
+        str(shift_row(scenario, NIGHT).activations), "-", "-", "-"]
 
 
 def test_html_is_one_self_contained_file(scenario: Scenario, tmp_path: Path) -> None:
@@ -272,3 +276,37 @@ def test_an_unwritable_html_path_is_a_clear_error(scenario: Scenario, tmp_path: 
     assert result.exit_code == 2
     assert "Traceback" not in result.stderr
     assert f"cannot write {target}" in result.stderr
+
+
+def test_the_headline_calls_only_e_stop_codes_e_stops_with_plurals_right(
+    tmp_path: Path
+) -> None:
+    """The user's afternoon: one camera fault and nothing else is 0 e-stops and 1 activation,
+    never "1 activations (e-stop presses…)"."""
+    from datetime import UTC, datetime
+
+    from faultledger import FaultLedger
+    from faultledger.reports.shift import build_report
+
+    calendar = ShiftCalendar.model_validate({"timezone": "UTC", "shifts": [
+        {"name": "morning", "start": "06:00", "end": "14:00"},
+        {"name": "afternoon", "start": "14:00", "end": "22:00"},
+        {"name": "night", "start": "22:00", "end": "06:00"}]})
+    with FaultLedger.open(f"sqlite:///{tmp_path / 'a.db'}", background=False,
+                          calendar=calendar) as ledger:
+        assert ledger.report("CAMERA_DROPPED_FRAMES", "FAILED", 1, "", "/camera",
+                             at=datetime(2026, 11, 25, 15, 0, tzinfo=UTC)).accepted
+        report = build_report(ledger, calendar, "2026-11-25/afternoon",
+                              datetime(2026, 11, 26, 3, 0, tzinfo=UTC))
+        assert report.headline == ("0 e-stops, 0 aborted goals; 1 activation of all faults "
+                                   "from 1 failed report, 1 confirmation")
+        assert report.previous is not None and report.previous.id == "2026-11-24/afternoon"
+        for at in (datetime(2026, 11, 25, 16, 0, tzinfo=UTC),
+                   datetime(2026, 11, 25, 17, 0, tzinfo=UTC)):
+            assert ledger.report("HW_ARM_EMERGENCY_STOP", "FAILED", 3, "", "/arm",
+                                 at=at).accepted
+            assert ledger.report("HW_ARM_EMERGENCY_STOP", "PASSED", 0, "", "/arm",
+                                 at=at + timedelta(seconds=5)).accepted
+        report = build_report(ledger, calendar, "2026-11-25/afternoon",
+                              datetime(2026, 11, 26, 3, 0, tzinfo=UTC))
+        assert report.headline.startswith("2 e-stops, 0 aborted goals; 3 activations")

@@ -33,7 +33,7 @@ def terminal(report: ShiftReport, width: int | None = None, *,
     if report.in_progress:
         lines.append(cell(f"in progress: figures up to {local_time(report, report.as_of)}",
                           "yellow"))
-    compared = report.previous.id if report.previous else "no previous instance"
+    compared = report.previous.id if report.previous else f"no previous {report.shift.name} shift"
     lines.append(cell(f"compared with {compared}", "dim"))
     lines.append(cell(report.headline, "bold"))
     notes = [cell(f"note: {note}", "yellow") for note in report.notes]

@@ -1,8 +1,13 @@
-"""The end-of-shift report: one shift instance's figures next to the previous instance's.
+"""The end-of-shift report: one shift instance's figures next to the previous shift's.
 
 Every number comes from the FaultLedger API (``stats``, ``downtimes``); this module only
 picks rows, compares them (difference and percent change) and formats values as text. The
-terminal rendering is ``cli/shift_report.py``, the HTML and PNG ones ``shift_html.py``.
+terminal rendering is ``cli/shift_report.py``, the HTML and PNG ones ``shift_html.py``, the
+JSON one (``GET /api/v1/shift-report?format=json``, which the dashboard shows) ``as_dict``.
+
+"Previous shift" has one definition for every view (``previous_shift``; docs/statistics.md):
+the previous instance of the *same* shift, the night before a night, so a trend compares
+like with like (a night shift is not a morning shift with fewer people).
 """
 
 from __future__ import annotations
@@ -10,6 +15,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
+from typing import Any
 
 from faultledger.domain.shifts import Period, ShiftCalendar, ShiftInstance
 from faultledger.domain.stat_rows import StatsRow
@@ -24,9 +30,10 @@ SEARCH_BACK = timedelta(days=14)
 """How far back the default shift (the last completed one) is looked for."""
 
 KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
-    ("failed_reports", "failed reports", "count"),
-    ("activations", "activations", "count"),
+    ("estops", "e-stops", "count"),
     ("aborted_goals", "aborted goals", "count"),
+    ("activations", "activations (all faults)", "count"),
+    ("failed_reports", "failed reports", "count"),
     ("confirmations", "confirmations", "count"),
     ("heals", "heals", "count"),
     ("clears", "clears", "count"),
@@ -40,12 +47,17 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
 """(StatsRow field, label, kind) of the figures compared with the previous shift."""
 
 GLOSSARY: tuple[tuple[str, str], ...] = (
-    ("activations", "FAILED edges: a FAILED report whose previous report of the same code was "
-     "not FAILED (or the first ever, or the first after a clear). One e-stop press is one "
-     "activation, however often it is re-reported: \"e-stops per shift\" counts these"),
+    ("e-stops", "activations of the e-stop codes (the config's estop_codes, by default the "
+     "hardware bridge's HW_*_EMERGENCY_STOP): one press of an emergency stop is one e-stop, "
+     "however often it is re-reported while held"),
+    ("activations (all faults)", "FAILED edges of every fault, e-stops included: a FAILED "
+     "report whose previous report of the same code was not FAILED (or the first ever, or "
+     "the first after a clear)"),
     ("failed reports", "every FAILED report stored, repeats included (a held e-stop "
      "re-reported each second is many failed reports, one activation)"),
     ("aborted goals", "action goals that ended ABORTED, each goal once"),
+    ("previous shift", "the previous instance of the same shift (the night before for a "
+     "night), so a trend compares like with like"),
     ("confirmations", "changes to CONFIRMED: a fault passed its debounce threshold (or was "
      "CRITICAL, or stayed PREFAILED past the timer)"),
     ("heals", "changes to HEALED: the fault's reporter said PASSED often enough"),
@@ -98,6 +110,7 @@ class HourBar:
     activations: int
     confirmations: int
     aborted_goals: int = 0
+    estops: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,6 +128,8 @@ class ShiftReport:
     downtimes: tuple[Downtime, ...]
     hours: tuple[HourBar, ...]
     calendar: ShiftCalendar
+    estop_codes: tuple[str, ...] = ()
+    """The globs that made ``estops`` (the ledger's configuration)."""
 
     @property
     def in_progress(self) -> bool:
@@ -134,11 +149,13 @@ class ShiftReport:
 
     @property
     def headline(self) -> str:
-        """Activations against failed reports in one line: ``5 activations (e-stop presses,
-        FAILED edges) from 12 failed reports; 3 aborted goals``."""
-        return (f"{self.row.activations} activations (e-stop presses, FAILED edges) from "
-                f"{self.row.failed_reports} failed reports; {self.row.confirmations} "
-                f"confirmations, {self.row.aborted_goals} aborted goals")
+        """E-stops and aborted goals first, then the rest in one line: ``5 e-stops, 3 aborted
+        goals; 7 activations of all faults from 12 failed reports, 4 confirmations``."""
+        row = self.row
+        return (f"{counted(row.estops, 'e-stop')}, {counted(row.aborted_goals, 'aborted goal')}"
+                f"; {counted(row.activations, 'activation')} of all faults from "
+                f"{counted(row.failed_reports, 'failed report')}, "
+                f"{counted(row.confirmations, 'confirmation')}")
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -173,6 +190,12 @@ class ShiftReport:
 
 
 # -- building ------------------------------------------------------------------------------------
+def previous_shift(calendar: ShiftCalendar, shift: ShiftInstance) -> ShiftInstance | None:
+    """THE previous shift of every view: the previous instance of the same shift name (the
+    night before a night; after a weekend without that shift, the last day it ran)."""
+    return calendar.previous(shift)
+
+
 def last_completed(calendar: ShiftCalendar, now: datetime) -> ShiftInstance:
     """The shift instance before the one containing ``now`` (the last one ended by ``now``
     when ``now`` is unscheduled time)."""
@@ -213,7 +236,7 @@ def build_report(ledger: FaultLedger, calendar: ShiftCalendar, shift_id: str | N
         if shift.start > now:
             raise InvalidInputError(f"shift {shift.id} has not started yet (it starts "
                                     f"{shift.start.astimezone(calendar.zone):%Y-%m-%d %H:%M})")
-    previous = calendar.previous(shift)
+    previous = previous_shift(calendar, shift)
     until = shift.end if shift.end <= now else None
     row = _shift_row(ledger, calendar, shift, now, until)
     previous_row = (None if previous is None
@@ -234,7 +257,8 @@ def build_report(ledger: FaultLedger, calendar: ShiftCalendar, shift_id: str | N
         previous=previous, previous_row=previous_row, figures=figures,
         offenders=tuple(by_code[:TOP]),
         downtimes=tuple(ledger.downtimes(shift.start, shift.end, TOP, as_of=now)),
-        hours=_hour_bars(hours, calendar), calendar=calendar)
+        hours=_hour_bars(hours, calendar), calendar=calendar,
+        estop_codes=ledger.estop_codes)
 
 
 def _shift_row(ledger: FaultLedger, calendar: ShiftCalendar, shift: ShiftInstance,
@@ -254,11 +278,16 @@ def _hour_bars(rows: list[StatsRow], calendar: ShiftCalendar) -> tuple[HourBar, 
     return tuple(
         HourBar(label if repeated[label] == 1
                 else f"{label} {r.period.start.astimezone(zone):%Z}",
-                r.period.start, r.activations, r.confirmations, r.aborted_goals)
+                r.period.start, r.activations, r.confirmations, r.aborted_goals, r.estops)
         for label, r in zip(labels, rows, strict=True))
 
 
 # -- formatting ----------------------------------------------------------------------------------
+def counted(count: int, noun: str) -> str:
+    """``1 e-stop``, ``2 e-stops``, ``0 aborted goals``: plurals right."""
+    return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
+
+
 def duration(seconds: float | None) -> str:
     """Human-readable: ``45.0s``, ``12m 05s``, ``3h 02m``, ``8h``, ``2d 04h``; ``-`` for None."""
     if seconds is None:
@@ -316,3 +345,36 @@ def local_time(report: ShiftReport, moment: datetime | None) -> str:
 def group_text(row: StatsRow, key: str) -> str:
     value = row.group.get(key, "")
     return severity_name(value) if key == "severity" and isinstance(value, int) else str(value)
+
+
+def as_dict(report: ShiftReport) -> dict[str, Any]:
+    """The report as JSON for the dashboard (``GET /api/v1/shift-report?format=json``): the
+    same figures, previous shift and texts as the terminal and HTML reports."""
+    shift, previous = report.shift, report.previous
+    return {
+        "shift": {"id": shift.id, "name": shift.name, "start": shift.start.isoformat(),
+                  "end": shift.end.isoformat(), "span_text": report.span_text,
+                  "length_text": report.length_text},
+        "timezone": report.timezone,
+        "in_progress": report.in_progress,
+        "as_of": report.as_of.isoformat(),
+        "previous": None if previous is None else {
+            "id": previous.id, "start": previous.start.isoformat(),
+            "end": previous.end.isoformat()},
+        "headline": report.headline,
+        "notes": list(report.notes),
+        "estop_codes": list(report.estop_codes),
+        "figures": [{"key": f.key, "label": f.label, "kind": f.kind, "value": f.value,
+                     "previous": f.previous, "value_text": value_text(f.kind, f.value),
+                     "previous_text": value_text(f.kind, f.previous),
+                     "change_text": change_text(f), "percent_text": percent_text(f)}
+                    for f in report.figures],
+        "offenders": [{"code": group_text(r, "code"), "estops": r.estops,
+                       "activations": r.activations, "confirmations": r.confirmations,
+                       "failed_reports": r.failed_reports, "active_seconds": r.active_seconds,
+                       "mttr_seconds": r.mttr_seconds} for r in report.offenders],
+        "hours": [{"label": h.label, "start": h.start.isoformat(), "estops": h.estops,
+                   "activations": h.activations, "confirmations": h.confirmations,
+                   "aborted_goals": h.aborted_goals} for h in report.hours],
+        "glossary": [{"term": term, "meaning": meaning} for term, meaning in GLOSSARY],
+    }

@@ -27,6 +27,7 @@ from faultledger.reports.shift import (
     TOP,
     ShiftReport,
     change_text,
+    counted,
     duration,
     group_text,
     local_time,
@@ -34,7 +35,8 @@ from faultledger.reports.shift import (
     value_text,
 )
 
-ACTIVATIONS_COLOR = "#c0392b"
+ESTOPS_COLOR = "#8e1b10"
+ACTIVATIONS_COLOR = "#e07b6f"
 CONFIRMATIONS_COLOR = "#e69f00"
 ABORTED_GOALS_COLOR = "#0072b2"
 DPI = 100
@@ -45,16 +47,16 @@ def _draw_hours(ax: Axes, report: ShiftReport) -> None:
     hours = report.hours
     xs = list(range(len(hours)))
     width = 0.27
-    ax.bar([x - width for x in xs], [h.activations for h in hours], width,
-           label="activations", color=ACTIVATIONS_COLOR)
-    ax.bar(xs, [h.confirmations for h in hours], width,
-           label="confirmations", color=CONFIRMATIONS_COLOR)
-    ax.bar([x + width for x in xs], [h.aborted_goals for h in hours], width,
+    ax.bar([x - width for x in xs], [h.estops for h in hours], width,
+           label="e-stops", color=ESTOPS_COLOR)
+    ax.bar(xs, [h.aborted_goals for h in hours], width,
            label="aborted goals", color=ABORTED_GOALS_COLOR)
+    ax.bar([x + width for x in xs], [h.activations for h in hours], width,
+           label="activations (all faults)", color=ACTIVATIONS_COLOR)
     ax.set_xticks(xs, [h.label for h in hours], rotation=45 if len(hours) > 12 else 0,
                   ha="right" if len(hours) > 12 else "center")
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_title(f"{report.shift.id}: activations, confirmations and aborted goals per hour "
+    ax.set_title(f"{report.shift.id}: e-stops, aborted goals and activations per hour "
                  f"({report.timezone})")
     ax.set_xlabel("local hour")
     ax.legend(loc="best")
@@ -108,11 +110,12 @@ def key_figures_lines(report: ShiftReport) -> list[str]:
     row = report.row
     lines = [f"Shift {report.shift.id}: {report.span_text}",
              report.headline,
-             f"{row.heals} heals, {row.clears} clears; fault time CONFIRMED "
+             f"{counted(row.heals, 'heal')}, {counted(row.clears, 'clear')}; fault time CONFIRMED "
              f"{duration(row.active_seconds)} (summed over faults), MTTR "
              f"{duration(row.mttr_seconds)}, MTBF {duration(row.mtbf_seconds)}",
-             f"time in flood {row.flood_percent:.1f} %, {row.chattering_codes} chattering "
-             f"codes, {row.stale_codes} stale codes"]
+             f"time in flood {row.flood_percent:.1f} %, "
+             f"{counted(row.chattering_codes, 'chattering code')}, "
+             f"{counted(row.stale_codes, 'stale code')}"]
     if report.in_progress:
         lines.append(f"in progress: figures up to {local_time(report, report.as_of)}")
     return [printable(line) for line in lines]
@@ -203,7 +206,7 @@ def html(report: ShiftReport) -> str:
                             percent_text(item)])
         trend = _trend(item.key, item.change)
         figure_classes.append(["", "", "", trend, trend])
-    offender_rows = [[str(rank), group_text(r, "code"), str(r.activations),
+    offender_rows = [[str(rank), group_text(r, "code"), str(r.estops), str(r.activations),
                       str(r.confirmations), str(r.failed_reports), duration(r.active_seconds),
                       duration(r.mttr_seconds)]
                      for rank, r in enumerate(report.offenders, 1)]
@@ -211,10 +214,12 @@ def html(report: ShiftReport) -> str:
                       local_time(report, d.start), local_time(report, d.end),
                       duration(d.seconds_in_range), duration(d.seconds)]
                      for d in report.downtimes]
-    hour_rows = [[h.label, str(h.activations), str(h.confirmations), str(h.aborted_goals)]
-                 for h in report.hours]
+    hour_rows = [[h.label, str(h.estops), str(h.aborted_goals), str(h.activations),
+                  str(h.confirmations)] for h in report.hours]
     context: dict[str, Any] = {
         "shift_id": shift.id,
+        "shift_name": shift.name,
+        "estop_codes": ", ".join(report.estop_codes),
         "span_text": report.span_text,
         "length_text": report.length_text,
         "previous_id": report.previous.id if report.previous else None,
@@ -229,12 +234,13 @@ def html(report: ShiftReport) -> str:
         "as_of": local_time(report, report.as_of),
         "figures": _table(["figure", shift.id, previous, "change", "change %"], figure_rows,
                           {0}, figure_classes),
-        "offenders": _table(["#", "code", "activations", "confirmations", "failed reports",
+        "offenders": _table(["#", "code", "e-stops", "activations", "confirmations",
+                             "failed reports",
                              "active time", "MTTR"], offender_rows, {1}),
         "downtimes": _table(["code", "source", "severity", "confirmed at", "ended",
                              "in shift", "episode"], downtime_rows, {0, 1, 2, 3, 4}),
-        "hours": _table(["hour", "activations", "confirmations", "aborted goals"], hour_rows,
-                        {0}),
+        "hours": _table(["hour", "e-stops", "aborted goals", "activations (all faults)",
+                         "confirmations"], hour_rows, {0}),
         "offenders_png": base64.b64encode(offenders_png(report)).decode("ascii"),
         "hours_png": base64.b64encode(hours_png(report)).decode("ascii"),
     }

@@ -1,6 +1,6 @@
 """``GET /api/v1/stats`` (every figure of docs/statistics.md, the numbers of `faultledger
 stats --json`) and ``GET /api/v1/shift-report`` (the report of `faultledger report-shift
---html`)."""
+--html`, or its figures as JSON for the dashboard)."""
 
 from __future__ import annotations
 
@@ -54,23 +54,30 @@ def router(context: Context) -> APIRouter:
             return Response(stats_csv(rows, groups), media_type="text/csv")
         return {"items": [row.as_dict() for row in rows]}
 
-    @api.get("/shift-report", summary="The end-of-shift report as HTML",
-             response_class=HTMLResponse)
+    @api.get("/shift-report", summary="The end-of-shift report as HTML or JSON",
+             response_model=None, responses={200: {"content": {"text/html": {}}}})
     def shift_report(
         shift: Annotated[str | None, Query(
             description="shift instance, e.g. 2026-11-21/night; default the last completed")
         ] = None,
-        as_of: str | None = None, _: Principal = read,
-    ) -> HTMLResponse:
-        # The same builder and HTML as `report-shift --html` (faultledger.reports); imported
-        # here so matplotlib loads only when a report is asked for.
-        from faultledger.reports.shift import build_report
-        from faultledger.reports.shift_html import html
+        as_of: str | None = None,
+        format: Annotated[str, Query(pattern="^(html|json)$", description=(
+            "html: the report of `report-shift --html`; json: its figures (the dashboard)"))
+        ] = "html",
+        _: Principal = read,
+    ) -> Any:
+        # The same builder as `report-shift` (faultledger.reports.shift); the HTML module is
+        # imported only for HTML, so matplotlib loads only when a chart is drawn.
+        from faultledger.reports.shift import as_dict, build_report
 
         try:
             report = build_report(ledger, context.calendar, shift, moment(as_of, "as_of"))
         except ValueError as error:
             raise InvalidInputError(str(error)) from None
+        if format == "json":
+            return as_dict(report)
+        from faultledger.reports.shift_html import html
+
         return HTMLResponse(html(report))
 
     return api
