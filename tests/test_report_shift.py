@@ -110,8 +110,9 @@ def test_key_counts_are_compared_with_the_previous_night(scenario: Scenario) -> 
     assert figures["MTTR"][3] == f"{mttr_change:+.1f} %"
     assert figures["MTBF"][:2] == [duration(this.mtbf_seconds), duration(before.mtbf_seconds)]
     assert list(figures) == ["e-stops", "aborted goals", "activations (all faults)",
-                             "failed reports", "confirmations", "heals", "clears", "fault time CONFIRMED (sum)",
-                             "MTTR", "MTBF", "time in flood", "chattering codes", "stale codes"]
+                             "failed reports", "confirmations", "heals", "clears",
+                             "fault time CONFIRMED (sum)", "MTTR", "MTBF", "time in flood",
+                             "chattering codes", "stale codes"]
 
 
 def test_top_offenders_are_ranked_by_activations(scenario: Scenario) -> None:
