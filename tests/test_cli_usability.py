@@ -214,13 +214,18 @@ def test_a_missing_driver_names_the_extra() -> None:
 
 
 # -- the shift report explains itself ------------------------------------------------------------
-def test_report_shift_says_activations_against_failed_reports(scenario: Scenario) -> None:
+def test_report_shift_headlines_e_stops_then_activations_of_all_faults(
+    scenario: Scenario
+) -> None:
     done = invoke("report-shift", *scenario.cli(NIGHT, "--as-of", AS_OF_TEXT))
     assert done.exit_code == 0, done.stderr
     with scenario.ledger() as ledger:
         [row] = ledger.stats("shift", NIGHT, NIGHT, calendar=scenario.calendar, as_of=AS_OF)
-    assert (f"{row.activations} activations (e-stop presses, FAILED edges) from "
-            f"{row.failed_reports} failed reports") in done.stdout
+    assert 0 < row.estops < row.activations
+    assert (f"{row.estops} e-stops, {row.aborted_goals} aborted goals; {row.activations} "
+            f"activations of all faults from {row.failed_reports} failed reports"
+            ) in " ".join(done.stdout.split())
+    assert "e-stop presses" not in done.stdout
     assert "report-shift --glossary" in done.stdout
     assert "MTBF:" not in done.stdout
     explained = invoke("report-shift", *scenario.cli(NIGHT, "--as-of", AS_OF_TEXT,

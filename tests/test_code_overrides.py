@@ -4,6 +4,7 @@ makes the bridges' faults heal on their PASSED (issue "Every report in the log",
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from collections.abc import Callable
@@ -143,6 +144,9 @@ def test_bad_code_overrides_are_refused_naming_the_field(tmp_path: Path, text: s
 
 
 def test_the_cli_reports_with_the_shipped_configuration(tmp_path: Path) -> None:
+    """The shipped config names its calendar relative to the working directory, as
+    `make run` uses it: run where config/ is (a copy of the checkout's)."""
+    shutil.copytree(SHIPPED.parent, Path.cwd() / "config")
     db = f"sqlite:///{tmp_path / 'cli.db'}"
     run = [sys.executable, "-m", "faultledger.cli.main"]
     for event in ("FAILED", "PASSED"):

@@ -18,7 +18,7 @@ from faultledger.cli.options import ConfigOption, DbOption, opened, prepare
 from faultledger.cli.options import fail as _fail
 from faultledger.errors import FaultLedgerError
 from faultledger.service import anchors
-from faultledger.service.config import load_settings
+from faultledger.service.config import config_path, load_settings
 from faultledger.service.output_files import OutputFileError, check_target, write_output
 
 anchor_app = typer.Typer(
@@ -70,7 +70,7 @@ def export(
     print the anchor as JSON, or write it to --output. The chain is checked first: a broken
     one, or an empty log, is not anchored (exit 1)."""
     try:
-        key_path = key or load_settings(config).anchors.key
+        key_path = key or load_settings(config_path(config)).anchors.key
         if key_path is None:
             _fail("give the private key to sign with: --key FILE (or anchors.key in the config)")
         private_key = anchors.load_private_key(key_path)

@@ -45,7 +45,7 @@ from faultledger.service.anchors import (
     verify_anchors,
     with_anchors,
 )
-from faultledger.service.config import load_settings
+from faultledger.service.config import config_path, load_settings
 from faultledger.service.exports import Writer, write_csv, write_jsonl
 from faultledger.service.ledger import (
     FaultLedger,
@@ -297,7 +297,7 @@ def _anchor_inputs(files: list[Path] | None, public_key: Path | None, config: Pa
     config also names anchors.public_key (an empty directory: a note, the chain alone).
     """
     try:
-        settings = load_settings(config).anchors
+        settings = load_settings(config_path(config)).anchors
         key_path = public_key or settings.public_key
         paths = list(files or [])
         if not paths and settings.directory is not None and key_path is not None:

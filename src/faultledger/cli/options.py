@@ -21,7 +21,7 @@ from faultledger.domain.shifts import ShiftCalendar
 from faultledger.errors import DamagedDatabaseError, FaultLedgerError
 from faultledger.service import times
 from faultledger.service.bootstrap import LedgerConfig, Role, open_ledger, resolve
-from faultledger.service.config import Settings, load_settings
+from faultledger.service.config import Settings, config_path, load_settings
 from faultledger.service.ledger import FaultLedger
 
 __all__ = ["ConfigOption", "DbOption", "JsonOption", "LedgerConfig", "Role", "ShiftsOption",
@@ -37,7 +37,8 @@ DbOption = Annotated[
 ConfigOption = Annotated[
     Path | None,
     typer.Option("--config", envvar="FAULTLEDGER_CONFIG", show_envvar=True,
-                 help="YAML configuration file (see config/faultledger.yaml)."),
+                 help="YAML configuration file (default: config/faultledger.yaml when it "
+                 "exists in the working directory, else the built-in defaults)."),
 ]
 ShiftsOption = Annotated[
     Path | None,
@@ -64,7 +65,7 @@ def fail(message: str, code: int = 2) -> NoReturn:
 
 def settings_for(config: Path | None) -> Settings:
     try:
-        return load_settings(config)
+        return load_settings(config_path(config))
     except FaultLedgerError as error:
         fail(str(error))
 
@@ -74,7 +75,7 @@ def prepare(db: str | None, config: Path | None, role: Role = Role.READER, *,
     """The command's ledger configuration (database URL, policy, calendar) by the precedence
     of docs/configuration.md; a bad config, calendar or database URL is exit 2."""
     try:
-        return resolve(load_settings(config), role, db=db, shifts=shifts,
+        return resolve(load_settings(config_path(config)), role, db=db, shifts=shifts,
                        config_given=config is not None)
     except FaultLedgerError as error:
         fail(str(error))

@@ -91,6 +91,16 @@ class ShiftCalendar(BaseModel):
     def zone(self) -> ZoneInfo:
         return ZoneInfo(self.timezone)
 
+    def summary(self, day: date | None = None) -> str:
+        """One line for start-up messages: ``Europe/Berlin: morning 06:00-14:00, afternoon
+        14:00-22:00, night 22:00-06:00`` (the version in force on ``day``, default the
+        first)."""
+        shifts = self.shifts if day is None else self.shifts_on(day) or self.shifts
+        parts = [f"{s.name} {s.start:%H:%M}-{s.end:%H:%M}"
+                 + ("" if s.weekdays == WEEKDAYS else f" ({','.join(s.weekdays)})")
+                 for s in shifts]
+        return f"{self.timezone}: {', '.join(parts)}"
+
     def shifts_on(self, day: date) -> tuple[ShiftDefinition, ...]:
         """Shifts starting on production day ``day`` under the version in force then."""
         shifts = self.shifts

@@ -284,6 +284,9 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
         mode = f" follower of {leader} (read-only)" if follower else ""
         print(f"fault_manager ready: db={describe(url)} faults={restored.faults} "
               f"events={restored.events} replayed={restored.replayed}{mode}", flush=True)
+        print(f"shifts: {config.calendar.summary()} "
+              f"({settings.shifts or 'built-in default'}); "
+              f"e-stops: {', '.join(config.estop_codes)}", flush=True)
         if web is not None:
             print(f"http ready: dashboard {web.url} API {web.url}docs", flush=True)
         node.get_logger().info(

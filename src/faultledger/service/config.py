@@ -14,6 +14,10 @@ from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES
 from faultledger.errors import ConfigError
 
 DEFAULT_DATABASE_URL = "sqlite:///var/faultledger.db"
+DEFAULT_CONFIG = Path("config/faultledger.yaml")
+"""The shipped configuration, found relative to the working directory when no --config /
+FAULTLEDGER_CONFIG names one: `make run` serves with it, so every command run from the same
+checkout then agrees with the server on the calendar, the e-stop codes and the token file."""
 MAX_CONFIG_BYTES = 1024 * 1024
 """A configuration file larger than this is refused unread (a wrong path, /dev/zero)."""
 M = TypeVar("M", bound=BaseModel)
@@ -82,14 +86,23 @@ class Settings(BaseModel):
     """Bridges `faultledger serve` runs: name → {enabled, config: FILE, inline settings}.
     Validated by the ROS adapter when it starts them (the core does not import ROS)."""
     shifts: Path | None = None
-    """Shift calendar YAML (see config/shifts.yaml) for statistics, relative to the working
-    directory; None: the built-in default calendar (UTC, three 8-hour shifts)."""
+    """Shift calendar YAML (see config/shifts.yaml) for statistics, shift ids and the zone
+    times are shown in, relative to the working directory; None: the built-in default
+    calendar (UTC, three 8-hour shifts)."""
     estop_codes: list[Annotated[str, Field(min_length=1, max_length=256)]] = Field(
         default_factory=lambda: list(DEFAULT_ESTOP_CODES), min_length=1, max_length=256)
     """Globs (case-sensitive) of the codes that are emergency stops: their activations are
     the ``estops`` figure every statistics row, report and the dashboard headline."""
     anchors: AnchorSettings = Field(default_factory=AnchorSettings)
     http: HttpSettings = Field(default_factory=HttpSettings)
+
+
+def config_path(given: Path | None) -> Path | None:
+    """The configuration file a command uses: the one given, else ``DEFAULT_CONFIG`` when it
+    exists in the working directory, else none (the built-in defaults)."""
+    if given is not None:
+        return given
+    return DEFAULT_CONFIG if DEFAULT_CONFIG.is_file() else None
 
 
 def load_settings(path: Path | None) -> Settings:
