@@ -11,6 +11,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi_offline import FastAPIOffline
 
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.http import errors, medkit
@@ -28,6 +29,9 @@ DESCRIPTION = (
     "sources without ROS, a resumable event stream and Prometheus metrics."
 )
 
+DOCS_ASSETS = "/static-offline-docs"
+"""Where Swagger UI's script, style sheet and icon are served (fastapi-offline's copies)."""
+
 
 def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalendar,
                tokens: TokenBook, *, read_only: bool = False) -> FastAPI:
@@ -42,8 +46,10 @@ def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalen
         finally:
             hub.stop()
 
-    app = FastAPI(title="faultledger", version=version(), description=DESCRIPTION,
-                  lifespan=lifespan)
+    # /docs (Swagger UI) from assets this server serves (fastapi-offline), not FastAPI's
+    # CDN: a robot has no internet. No /redoc: ReDoc's page fetches Redocly's logo from a CDN.
+    app = FastAPIOffline(title="faultledger", version=version(), description=DESCRIPTION,
+                         lifespan=lifespan, static_url=DOCS_ASSETS, redoc_url=None)
     app.state.context = context
     errors.install(app)
     from faultledger.http.routes import register  # the routes import the app's modules
