@@ -58,10 +58,8 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
         except FaultLedgerError as error:
             fail(str(error))
         mode = " (read-only)" if read_only else ""
-        tokens = (f"{len(server.tokens)} tokens" if server.tokens
-                  else "open: no tokens, loopback only")
         typer.echo(printable(f"faultledger http ready{mode}: {server.url} db="
-                             f"{describe(ledger_config.url)} ({tokens}); "
+                             f"{describe(ledger_config.url)}; {server.access}; "
                              f"dashboard {server.url}, API {server.url}docs"))
         server.run()
     finally:

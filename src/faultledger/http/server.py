@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import ipaddress
 import logging
+import signal
 import socket
 import threading
 import time
@@ -17,6 +18,7 @@ import uvicorn
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.errors import ConfigError
 from faultledger.http.app import create_app
+from faultledger.http.context import Context
 from faultledger.service.config import HttpSettings
 from faultledger.service.ledger import FaultLedger
 from faultledger.service.tokens import TokenBook, configured
@@ -76,9 +78,29 @@ class HttpServer:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}/"
 
+    @property
+    def access(self) -> str:
+        """What the ready lines say of tokens (docs/http.md, "Auth")."""
+        if not self.tokens:
+            return "no tokens: loopback only"
+        return f"tokens: {len(self.tokens)} (a token is needed on every request)"
+
     def run(self) -> None:
-        """Serve in this thread until SIGINT/SIGTERM (uvicorn's own handlers)."""
-        self.server.run(sockets=[self._socket])
+        """Serve until SIGINT or SIGTERM (the main thread waits for them itself), then stop as
+        ``stop`` does: open streams end cleanly, and the caller returns normally (exit 0).
+        uvicorn's own handlers would cut streams off and raise the signal again afterwards."""
+        stopping = threading.Event()
+        previous = {number: signal.signal(number, lambda *_: stopping.set())
+                    for number in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            self.start()
+            assert self._thread is not None
+            while not stopping.wait(0.5) and self._thread.is_alive():
+                pass
+        finally:
+            self.stop()
+            for number, handler in previous.items():
+                signal.signal(number, handler)
 
     def start(self) -> None:
         """Serve in a background thread; returns once it accepts connections."""
@@ -93,6 +115,10 @@ class HttpServer:
             time.sleep(0.02)
 
     def stop(self) -> None:
+        """Stop serving: every event stream ends first, with the closing chunk of its response
+        (uvicorn would otherwise wait for those endless responses, then cancel them)."""
+        context: Context = self.app.state.context
+        context.hub.close()
         self.server.should_exit = True
         if self._thread is not None:
             self._thread.join(timeout=5)

@@ -75,6 +75,15 @@ class StreamHub:
         with self._lock:
             self._buffer.covered_after = self._ledger.last_seq
 
+    def close(self) -> None:
+        """End every stream now, from any thread (the server is stopping): each client's
+        ``events`` returns, so its response ends with the closing chunk instead of being cut
+        off mid-stream. New streams end at once."""
+        loop = self._loop
+        if loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop is already closed
+                loop.call_soon_threadsafe(self.stop)
+
     def stop(self) -> None:
         self._stopped = True
         if self._subscription is not None:

@@ -288,7 +288,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
               f"({settings.shifts or 'built-in default'}); "
               f"e-stops: {', '.join(config.estop_codes)}", flush=True)
         if web is not None:
-            print(f"http ready: dashboard {web.url} API {web.url}docs", flush=True)
+            print(f"http ready: dashboard {web.url} API {web.url}docs; {web.access}",
+                  flush=True)
         node.get_logger().info(
             f"serving {node.get_fully_qualified_name()}{mode} on {describe(url)}: restored "
             f"{restored.faults} faults from {restored.events} events")
