@@ -33,6 +33,8 @@ DRIVERS = {
     "postgresql+psycopg": ("psycopg", "postgresql"),
 }
 """URL scheme -> (module it needs, the faultledger extra that installs it)."""
+SUPPORTED = ("sqlite", "postgresql")
+"""The databases faultledger runs on (store/dialects.py); any other is refused up front."""
 
 
 class Role(StrEnum):
@@ -60,8 +62,9 @@ class LedgerConfig:
 
 def database_url(text: str) -> str:
     """A SQLAlchemy URL, or a plain file path taken as a SQLite file (``var/f.db``,
-    ``/data/faults.db``). A URL whose driver is not installed is refused naming the extra
-    to install, rather than failing later on an import."""
+    ``/data/faults.db``). A URL of a database faultledger does not run on (``mysql://``…),
+    or whose driver is not installed (naming the extra to install) or is asyncio-only, is
+    refused here, rather than failing later on an import."""
     value = text.strip()
     if not value:
         raise ConfigError("the database URL is empty")
@@ -73,15 +76,28 @@ def database_url(text: str) -> str:
         raise ConfigError(f"invalid database URL {value!r}: {error}") from None
     shown = url.render_as_string(hide_password=True)
     try:
-        url.get_dialect()
+        dialect = url.get_dialect()
     except NoSuchModuleError:
         raise ConfigError(f"unknown database kind {url.drivername!r} in {shown!r}: use "
                           "sqlite:///FILE (or a plain path) or postgresql+psycopg://…") from None
+    if url.get_backend_name() not in SUPPORTED:
+        raise ConfigError(f"unsupported database {url.get_backend_name()!r} in {shown!r}: "
+                          "faultledger runs on SQLite (sqlite:///FILE or a plain path) or "
+                          "PostgreSQL (postgresql+psycopg://…)")
     needed = DRIVERS.get(url.drivername)
     if needed is not None and importlib.util.find_spec(needed[0]) is None:
         module, extra = needed
         raise ConfigError(f"database URL {shown!r} needs "
                           f"the {module} driver: pip install 'faultledger[{extra}]'")
+    try:
+        if getattr(dialect, "is_async", False):
+            raise ImportError("an asyncio driver")
+        dialect.import_dbapi()
+    except ImportError:
+        raise ConfigError(f"database URL {shown!r}: the {url.get_driver_name()} driver cannot "
+                          "be used (not installed, or asyncio only); use sqlite:///FILE or "
+                          "postgresql+psycopg://… (pip install 'faultledger[postgresql]')"
+                          ) from None
     return value
 
 
