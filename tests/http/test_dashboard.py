@@ -68,9 +68,14 @@ def test_reports_appear_live_and_views_render(browser: WebDriver, tmp_path: Path
         assert "CONFIRMED (active" in browser.find_element(By.ID, "detail-fields").text
         browser.save_screenshot(str(SHOTS / "fault-detail.png"))
         browser.find_element(By.CSS_SELECTOR, "button[data-view='stats']").click()
-        wait(browser, lambda b: len(b.find_elements(By.CSS_SELECTOR, "#figures .figure")) == 6)
-        figures = browser.find_element(By.ID, "figures").text
-        assert "e-stops (activations)" in figures and "aborted goals" in figures
+        browser.find_element(By.ID, "stats-shift").send_keys(current_shift())
+        browser.find_element(By.CSS_SELECTOR, "#stats-form button[type='submit']").click()
+        wait(browser, lambda b: b.find_elements(By.CSS_SELECTOR, "#figures .figure")
+             and "in progress" in b.find_element(By.ID, "stats-title").text)
+        keys = browser.execute_script(
+            "return [...document.querySelectorAll('#figures .figure')].map(f => f.dataset.key)")
+        assert keys[:2] == ["estops", "aborted_goals"]  # the report's order: e-stops first
+        assert "e-stop" in browser.find_element(By.ID, "figures").text
         wait(browser, lambda b: len(b.find_elements(By.CSS_SELECTOR, "#offenders tbody tr")) >= 1)
         browser.save_screenshot(str(SHOTS / "statistics.png"))
         browser.find_element(By.CSS_SELECTOR, "button[data-view='history']").click()
@@ -87,6 +92,17 @@ def test_reports_appear_live_and_views_render(browser: WebDriver, tmp_path: Path
         browser.set_window_size(1366, 900)
     finally:
         server.stop()
+
+
+def current_shift() -> str:
+    """The id of the default calendar's shift running now (UTC, three 8-hour shifts)."""
+    from datetime import UTC, datetime
+
+    from faultledger.domain.periods import default_calendar
+
+    shift = default_calendar().shift_at(datetime.now(UTC))
+    assert shift is not None
+    return shift.id
 
 
 def token(file: Path, name: str, role: str) -> str:

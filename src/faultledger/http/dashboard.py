@@ -28,9 +28,11 @@ def _environment() -> Environment:
 
 def router(context: Context) -> APIRouter:
     api = APIRouter(tags=["dashboard"], include_in_schema=False)
+    # The page shows every time in the shift calendar's zone (as the reports do) and names
+    # the configured e-stop globs; both are fixed for the server's life.
     page = _environment().get_template("dashboard.html").render(
-        version=version(), read_only=context.read_only,
-        zone=str(context.calendar.zone))
+        version=version(), read_only=context.read_only, zone=context.calendar.timezone,
+        estop_codes=list(context.ledger.estop_codes))
 
     @api.get("/", response_class=HTMLResponse)
     def dashboard() -> HTMLResponse:

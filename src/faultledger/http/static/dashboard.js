@@ -1,5 +1,5 @@
 // faultledger dashboard: plain ES2020, no dependencies, served by the fault manager itself.
-// Untrusted text (codes, descriptions, sources) only ever goes into textContent.
+// Untrusted text (codes, descriptions, sources, reasons) only ever goes into textContent.
 "use strict";
 window.faultledgerPageId = Math.random().toString(36).slice(2);
 
@@ -9,10 +9,12 @@ const GROUPS = {
   all: ["PREFAILED", "CONFIRMED", "PREPASSED", "HEALED", "CLEARED"],
 };
 const ORDER = { CONFIRMED: 0, PREFAILED: 1, PREPASSED: 2, HEALED: 3, CLEARED: 4 };
+const SEVERITIES = ["INFO", "WARN", "ERROR", "CRITICAL"];
+const DETAIL_PAGE = 50;
+const HISTORY_PAGE = 100;
 const state = {
   token: sessionStorage.getItem("faultledger-token") || "",
-  faults: new Map(), filter: "", lastEventId: null, selected: null,
-  historyNext: null, historyParams: null, streaming: false,
+  faults: new Map(), filter: "", lastEventId: null, selected: null, streaming: false,
 };
 const $ = (id) => document.getElementById(id);
 
@@ -27,7 +29,12 @@ function row(cells) {
   for (const cell of cells) tr.appendChild(cell instanceof Node ? cell : el("td", cell));
   return tr;
 }
-function when(seconds) { return seconds ? new Date(seconds * 1000).toLocaleString() : "–"; }
+function cell(...children) {
+  const td = el("td");
+  td.append(...children);
+  return td;
+}
+function plural(count, one, many) { return `${count} ${count === 1 ? one : many}`; }
 function duration(seconds) {
   if (seconds === null || seconds === undefined) return "–";
   const s = Math.round(seconds);
@@ -36,6 +43,32 @@ function duration(seconds) {
   return `${Math.floor(s / 3600)} h ${Math.floor((s % 3600) / 60)} min`;
 }
 const sleep = (ms) => new Promise((done) => setTimeout(done, ms));
+
+// -- times: always in the shift calendar's zone (the server's), never the browser's ----------
+const ZONE = (() => {
+  const wanted = document.body.dataset.zone || "UTC";
+  try {
+    new Intl.DateTimeFormat("en-GB", { timeZone: wanted });
+    return wanted;
+  } catch (error) {
+    $("zone-note").textContent = `all times in UTC: this browser does not know the shift calendar's zone ${wanted}`;
+    document.querySelectorAll(".zone").forEach((span) => { span.textContent = "UTC"; });
+    return "UTC";
+  }
+})();
+const CLOCK = new Intl.DateTimeFormat("en-GB", {
+  timeZone: ZONE, year: "numeric", month: "2-digit", day: "2-digit", hour: "2-digit",
+  minute: "2-digit", second: "2-digit", hourCycle: "h23", timeZoneName: "short",
+});
+/** "2026-11-24 14:03:05" (and " CET" with the zone's abbreviation) in the calendar's zone. */
+function clock(milliseconds, withZone) {
+  const p = {};
+  for (const { type, value } of CLOCK.formatToParts(new Date(milliseconds))) p[type] = value;
+  const text = `${p.year}-${p.month}-${p.day} ${p.hour}:${p.minute}:${p.second}`;
+  return withZone ? `${text} ${p.timeZoneName}` : text;
+}
+function when(seconds, withZone) { return seconds ? clock(seconds * 1000, withZone) : "–"; }
+function recordTime(record) { return clock(record.occurred_at_ns / 1e6); }
 
 // -- API -------------------------------------------------------------------------------------
 class AuthNeeded extends Error {}
@@ -70,6 +103,9 @@ async function download(path, name) {
   link.click();
   link.remove();
 }
+function showError(id, error) {
+  if (!(error instanceof AuthNeeded)) $(id).textContent = error.message;
+}
 
 function askForToken(message) {
   $("token-form").hidden = false;
@@ -84,18 +120,24 @@ $("token-form").addEventListener("submit", (event) => {
   start();
 });
 
-// -- faults ----------------------------------------------------------------------------------
+// -- badges ----------------------------------------------------------------------------------
 function statusBadge(status) { return el("span", status, `status ${status}`); }
+/** A severity label (INFO … CRITICAL, or a number 0-3 from a record) coloured by level. */
+function severityBadge(severity) {
+  const label = typeof severity === "number" ? (SEVERITIES[severity] || String(severity)) : String(severity);
+  return el("span", label, `severity sev-${SEVERITIES.includes(label) ? label : "UNKNOWN"}`);
+}
 
+// -- faults ----------------------------------------------------------------------------------
 function faultRow(fault) {
   const tr = row([
-    el("td", fault.fault_code), (() => { const td = el("td"); td.appendChild(statusBadge(fault.status)); return td; })(),
-    fault.severity_label, el("td", fault.description, "text wide"), fault.occurrence_count,
+    el("td", fault.fault_code), cell(statusBadge(fault.status)), cell(severityBadge(fault.severity_label)),
+    el("td", fault.description, "text wide"), fault.occurrence_count,
     when(fault.last_occurred), el("td", fault.reporting_sources.join(", "), "text wide"),
   ]);
   tr.dataset.code = fault.fault_code;
   if (fault.fault_code === state.selected) tr.classList.add("selected");
-  tr.addEventListener("click", () => showDetail(fault.fault_code));
+  tr.addEventListener("click", () => selectFault(fault.fault_code));
   return tr;
 }
 
@@ -106,7 +148,7 @@ function renderFaults(changed) {
   const body = $("fault-table").tBodies[0];
   body.replaceChildren(...shown.map(faultRow));
   $("no-faults").hidden = shown.length > 0;
-  $("fault-count").textContent = `${shown.length} shown of ${state.faults.size}`;
+  $("fault-count").textContent = `${shown.length} shown of ${plural(state.faults.size, "fault", "faults")}`;
   if (changed) {
     const tr = body.querySelector(`tr[data-code="${CSS.escape(changed)}"]`);
     if (tr) tr.classList.add("flash");
@@ -141,7 +183,7 @@ function handleBlock(block) {
   const event = JSON.parse(data);
   state.faults.set(event.fault.fault_code, event.fault);
   renderFaults(event.fault.fault_code);
-  if (state.selected === event.fault.fault_code) showDetail(state.selected);
+  if (state.selected === event.fault.fault_code) refreshDetail();
 }
 
 async function stream() {
@@ -177,42 +219,142 @@ async function stream() {
   }
 }
 
-async function showDetail(code) {
+// -- fault detail: fields, and its history newest first, paged backwards ------------------------
+// Loads run one after another (a chain), so a live update and "older" never interleave; a
+// load for a fault no longer selected is dropped.
+const detail = { code: null, records: [], total: null, before: null, chain: Promise.resolve(),
+  refreshing: false };
+
+function queueDetail(task) {
+  const code = detail.code;
+  detail.chain = detail.chain.then(() => (detail.code === code ? task(code) : undefined))
+    .catch((error) => showError("detail-history-message", error));
+  return detail.chain;
+}
+
+function selectFault(code) {
   state.selected = code;
   document.querySelectorAll("#fault-table tr.selected").forEach((tr) => tr.classList.remove("selected"));
   const tr = document.querySelector(`#fault-table tr[data-code="${CSS.escape(code)}"]`);
   if (tr) tr.classList.add("selected");
   $("detail").hidden = false;
+  $("view-faults").classList.add("detail-open");
   $("detail-code").textContent = code;
+  $("detail-description").textContent = "";
+  $("detail-fields").replaceChildren();
+  $("clear-message").textContent = "";
+  Object.assign(detail, { code, records: [], total: null, before: null, refreshing: false });
+  renderDetailHistory();
+  queueDetail(loadDetailFields);
+  return queueDetail((c) => loadDetailHistory(c, "newest"));
+}
+
+function refreshDetail() {
+  if (detail.refreshing) return;  // one queued refresh covers a burst of updates
+  detail.refreshing = true;
+  queueDetail(async (code) => {
+    detail.refreshing = false;
+    await loadDetailFields(code);
+    await loadDetailHistory(code, "newer");
+  });
+}
+
+async function loadDetailFields(code) {
   try {
-    const detail = await apiJson(`/api/v1/faults/${encodeURIComponent(code)}`);
-    const x = detail["x-medkit"];
-    $("detail-description").textContent = detail.item.fault_name || "";
+    const answer = await apiJson(`/api/v1/faults/${encodeURIComponent(code)}`);
+    if (detail.code !== code) return;
+    const x = answer["x-medkit"];
+    $("detail-description").textContent = answer.item.fault_name || "";
     const fields = $("detail-fields");
     fields.replaceChildren();
-    const status = detail.item.status;
-    const add = (name, value) => { fields.appendChild(el("dt", name)); fields.appendChild(el("dd", value)); };
+    const status = answer.item.status;
+    const add = (name, value) => {
+      fields.appendChild(el("dt", name));
+      const dd = el("dd");
+      dd.append(value);
+      fields.appendChild(dd);
+    };
     add("status", `${x.status_raw} (${status.aggregatedStatus}; testFailed ${status.testFailed}, confirmedDTC ${status.confirmedDTC}, pendingDTC ${status.pendingDTC})`);
-    add("severity", x.severity_label);
-    add("occurrences", x.occurrence_count);
-    add("first occurred", when(x.first_occurred));
-    add("last occurred", when(x.last_occurred));
-    add("last passed", when(x.last_passed));
+    add("severity", severityBadge(x.severity_label));
+    add("occurrences", String(x.occurrence_count));
+    add("first occurred", when(x.first_occurred, true));
+    add("last occurred", when(x.last_occurred, true));
+    add("last passed", when(x.last_passed, true));
     add("sources", (x.reporting_sources || []).join(", ") || "–");
     $("clear-form").hidden = document.body.dataset.readOnly === "true" || x.status_raw === "CLEARED";
-    const history = await apiJson(`/api/v1/history?code=${encodeURIComponent(code)}&limit=200`);
-    $("detail-history").tBodies[0].replaceChildren(...history.items.slice().reverse().map((r) => {
-      const p = r.payload;
-      const what = r.kind === "fault_reported" ? `${p.event_type} (${p.severity})`
-        : r.kind === "fault_cleared" ? `cleared${p.reason ? ": " + p.reason : ""}` : r.kind;
-      return row([r.seq, new Date(r.occurred_at_ns / 1e6).toLocaleString(), el("td", what, "text"),
-        el("td", p.actor || r.source_id || "", "text")]);
-    }));
   } catch (error) {
-    if (!(error instanceof AuthNeeded)) $("detail-description").textContent = error.message;
+    if (detail.code === code) showError("detail-description", error);
   }
 }
-$("detail-close").addEventListener("click", () => { $("detail").hidden = true; state.selected = null; renderFaults(); });
+
+/** "newest": the newest page; "older": the page before the oldest shown; "newer": the
+ * records written since the newest shown (a live update), added on top. */
+async function loadDetailHistory(code, which) {
+  $("detail-history-message").textContent = "";
+  const params = new URLSearchParams({ code, total: "true" });
+  if (which === "newer" && detail.records.length) {
+    params.set("after_seq", String(detail.records[0].seq));
+    params.set("limit", "1000");
+    const page = await apiJson(`/api/v1/history?${params}`);
+    if (detail.code !== code) return;
+    if (page.next_after_seq !== null) return loadDetailHistory(code, "newest");  // a flood: start over
+    detail.records.unshift(...page.items.reverse());
+    detail.total = page.total;
+    renderDetailHistory(page.items.length);
+    return;
+  }
+  params.set("order", "desc");
+  params.set("limit", String(DETAIL_PAGE));
+  if (which === "older") params.set("before_seq", String(detail.before));
+  const page = await apiJson(`/api/v1/history?${params}`);
+  if (detail.code !== code) return;
+  if (which === "older") detail.records.push(...page.items); else detail.records = page.items;
+  detail.before = page.next_before_seq;
+  detail.total = page.total;
+  renderDetailHistory();
+}
+
+function recordText(r) {
+  const p = r.payload;
+  if (r.kind === "fault_reported") return [`${p.event_type} `, severityBadge(p.severity)];
+  if (r.kind === "fault_cleared") return [`cleared${p.reason ? ": " + p.reason : ""}`];
+  if (r.kind === "fault_confirmed_by_timer") return ["confirmed by the timer"];
+  if (r.kind === "reclassified_on_startup") return ["reclassified on startup"];
+  return [r.kind];
+}
+
+function renderDetailHistory(added = 0) {
+  const body = $("detail-history").tBodies[0];
+  body.replaceChildren(...detail.records.map((r, i) => {
+    const tr = row([r.seq, recordTime(r), cell(...recordText(r)),
+      el("td", (r.payload && r.payload.actor) || r.source_id || "", "text")]);
+    tr.dataset.seq = String(r.seq);
+    if (i < added) tr.classList.add("flash");
+    return tr;
+  }));
+  $("detail-count").textContent = countText(detail.records.length, detail.total);
+  $("detail-older").hidden = detail.before === null || detail.before === undefined;
+}
+
+/** "50 newest of 300 records", or "all 3 records". */
+function countText(shown, total) {
+  if (total === null || total === undefined) return shown ? plural(shown, "record", "records") : "";
+  if (shown >= total) return total === 0 ? "no records" : total === 1 ? "1 record" : `all ${total} records`;
+  return `${shown} newest of ${total} records`;
+}
+
+$("detail-older").addEventListener("click", () => {
+  $("detail-older").disabled = true;
+  queueDetail((code) => loadDetailHistory(code, "older"))
+    .finally(() => { $("detail-older").disabled = false; });
+});
+$("detail-close").addEventListener("click", () => {
+  $("detail").hidden = true;
+  $("view-faults").classList.remove("detail-open");
+  state.selected = null;
+  detail.code = null;
+  renderFaults();
+});
 $("status-filter").addEventListener("change", (event) => { state.filter = event.target.value; renderFaults(); });
 $("clear-form").addEventListener("submit", async (event) => {
   event.preventDefault();
@@ -228,118 +370,193 @@ $("clear-form").addEventListener("submit", async (event) => {
       $("clear-reason").value = "";
     }
   } catch (error) {
-    if (!(error instanceof AuthNeeded)) message.textContent = error.message;
+    showError("clear-message", error);
   }
 });
 
-// -- statistics ------------------------------------------------------------------------------
-function isoDate(date) {
-  const pad = (n) => String(n).padStart(2, "0");
-  return `${date.getFullYear()}-${pad(date.getMonth() + 1)}-${pad(date.getDate())}`;
+// -- statistics: the server's end-of-shift report (JSON) and its stats rows --------------------
+const SVG = "http://www.w3.org/2000/svg";
+const WEEKDAYS = ["Sun", "Mon", "Tue", "Wed", "Thu", "Fri", "Sat"];
+
+function svg(tag, attributes, text) {
+  const node = document.createElementNS(SVG, tag);
+  for (const [name, value] of Object.entries(attributes)) node.setAttribute(name, String(value));
+  if (text !== undefined) node.textContent = String(text);
+  return node;
+}
+/** Width of a text at the charts' 11 px font, measured once per text. */
+const measured = new Map();
+let measuring = null;
+function textWidth(text) {
+  if (!measured.has(text)) {
+    if (measuring === null) {
+      measuring = document.createElement("canvas").getContext("2d");
+      measuring.font = `11px ${getComputedStyle(document.body).fontFamily}`;
+    }
+    measured.set(text, measuring.measureText(text).width);
+  }
+  return measured.get(text);
+}
+/** Date arithmetic on a production day "YYYY-MM-DD" (a calendar date, no zone involved). */
+function addDays(day, days) {
+  const [y, m, d] = day.split("-").map(Number);
+  return new Date(Date.UTC(y, m - 1, d + days)).toISOString().slice(0, 10);
+}
+function weekday(day) { return WEEKDAYS[new Date(`${day}T00:00:00Z`).getUTCDay()]; }
+
+// Charts are drawn at the container's real width (no stretched text) and again when it
+// changes; a label is drawn only where it fits, so none overlap.
+const charts = new Map();
+const resized = new ResizeObserver((entries) => { for (const entry of entries) drawChart(entry.target); });
+
+function bars(container, spec) {
+  charts.set(container, spec);
+  resized.observe(container);
+  drawChart(container);
 }
 
-function bars(container, rows, key, colour) {
-  const svgNS = "http://www.w3.org/2000/svg";
-  const svg = document.createElementNS(svgNS, "svg");
-  svg.setAttribute("viewBox", "0 0 600 160");
-  svg.setAttribute("preserveAspectRatio", "none");
+function drawChart(container) {
+  const spec = charts.get(container);
+  const width = Math.floor(container.clientWidth);
+  if (!spec || width < 50) return;  // hidden: drawn when shown
+  const { rows, key, colour, one, many, highlight } = spec;
+  const height = 176, top = 22, base = 134, left = 24;
+  const chart = svg("svg", { viewBox: `0 0 ${width} ${height}`, width, height, role: "img" });
   const peak = Math.max(1, ...rows.map((r) => r[key] || 0));
-  const width = 600 / Math.max(rows.length, 1);
+  const slot = (width - left - 4) / Math.max(rows.length, 1);
+  const scale = (base - top) / peak;
+  chart.append(svg("line", { x1: left, x2: width, y1: base, y2: base, stroke: "#9aa1ad" }),
+    svg("line", { x1: left, x2: width, y1: base - peak * scale, y2: base - peak * scale, stroke: "#e3e6ec" }),
+    svg("text", { x: left - 4, y: base - peak * scale + 4, "text-anchor": "end", class: "axis" }, peak),
+    svg("text", { x: left - 4, y: base + 4, "text-anchor": "end", class: "axis" }, 0));
   rows.forEach((r, i) => {
     const value = r[key] || 0;
-    const height = (value / peak) * 110;
-    const rect = document.createElementNS(svgNS, "rect");
-    rect.setAttribute("x", String(i * width + 1));
-    rect.setAttribute("y", String(140 - height));
-    rect.setAttribute("width", String(Math.max(width - 2, 1)));
-    rect.setAttribute("height", String(height));
-    rect.setAttribute("fill", colour);
-    const title = document.createElementNS(svgNS, "title");
-    title.textContent = `${r.period}: ${value}`;
-    rect.appendChild(title);
-    svg.appendChild(rect);
-    if (value) {
-      const label = document.createElementNS(svgNS, "text");
-      label.setAttribute("x", String(i * width + width / 2));
-      label.setAttribute("y", String(136 - height));
-      label.setAttribute("text-anchor", "middle");
-      label.setAttribute("font-size", "11");
-      label.textContent = String(value);
-      svg.appendChild(label);
+    const x = left + i * slot;
+    const bar = svg("rect", {
+      x: x + 1, y: base - value * scale, width: Math.max(slot - 2, 1), height: value * scale,
+      fill: colour, class: r.period === highlight ? "bar chosen" : "bar",
+    });
+    bar.appendChild(svg("title", {}, `${r.period}: ${plural(value, one, many)}`));
+    chart.appendChild(bar);
+    const valueText = String(value);
+    if (value && textWidth(valueText) + 2 <= slot) {
+      chart.appendChild(svg("text", { x: x + slot / 2, y: base - value * scale - 3, "text-anchor": "middle", class: "value" }, valueText));
     }
-    const day = String(r.period).split("/")[0];
-    if (i === 0 || String(rows[i - 1].period).split("/")[0] !== day) {
-      const tick = document.createElementNS(svgNS, "text");
-      tick.setAttribute("x", String(i * width + 2));
-      tick.setAttribute("y", "155");
-      tick.setAttribute("font-size", "11");
-      tick.setAttribute("fill", "#5d6678");
-      tick.textContent = day.slice(5);
-      svg.appendChild(tick);
+    const initial = String(r.period_name || "").slice(0, 1).toUpperCase();
+    if (initial && textWidth("W") + 4 <= slot) {
+      chart.appendChild(svg("text", { x: x + slot / 2, y: base + 13, "text-anchor": "middle", class: "shift" }, initial));
     }
   });
-  const axis = document.createElementNS(svgNS, "line");
-  axis.setAttribute("x1", "0"); axis.setAttribute("x2", "600");
-  axis.setAttribute("y1", "140"); axis.setAttribute("y2", "140");
-  axis.setAttribute("stroke", "#999");
-  svg.appendChild(axis);
-  container.replaceChildren(svg);
+  // One label per production day, centred under its shifts: the longest form that fits.
+  let first = 0;
+  for (let i = 1; i <= rows.length; i += 1) {
+    if (i < rows.length && rows[i].production_day === rows[first].production_day) continue;
+    const day = rows[first].production_day || String(rows[first].period).split("/")[0];
+    const x0 = left + first * slot, span = (i - first) * slot;
+    if (first > 0) chart.appendChild(svg("line", { x1: x0, x2: x0, y1: top, y2: height - 2, stroke: "#e3e6ec" }));
+    const label = [`${weekday(day)} ${day.slice(5)}`, day.slice(5), day.slice(8)].find((t) => textWidth(t) + 4 <= span);
+    if (label) chart.appendChild(svg("text", { x: x0 + span / 2, y: base + 30, "text-anchor": "middle", class: "day" }, label));
+    first = i;
+  }
+  container.replaceChildren(chart);
 }
 
-function figure(label, value, previous, format) {
+const GOOD_WHEN_HIGHER = new Set(["mtbf_seconds"]);
+const NEUTRAL = new Set(["heals", "clears"]);
+
+function valueText(kind, value) {
+  if (value === null || value === undefined) return "–";
+  if (kind === "duration") return duration(value);
+  if (kind === "percent") return `${Number(value).toFixed(1)} %`;
+  return String(Math.round(value));
+}
+
+/** "e-stops" → "e-stop", "activations (all faults)" → "activation (all faults)". */
+function singular(label) {
+  const cut = label.indexOf(" (");
+  const noun = cut < 0 ? label : label.slice(0, cut);
+  return noun.endsWith("s") ? noun.slice(0, -1) + label.slice(noun.length) : label;
+}
+
+/** One figure of the report: the value, its label (singular for a count of 1), the previous
+ * shift's value named by its id, and the report's own difference texts. */
+function figureBox(figure, previousShift) {
   const box = el("div", null, "figure");
-  box.appendChild(el("div", format(value), "value"));
-  box.appendChild(el("div", label, "label"));
-  if (previous !== undefined && previous !== null) {
-    const delta = (value || 0) - (previous || 0);
-    const text = `${delta > 0 ? "▲" : delta < 0 ? "▼" : "="} previous shift ${format(previous)}`;
-    box.appendChild(el("div", text, `change ${delta > 0 ? "up" : delta < 0 ? "down" : ""}`));
+  box.dataset.key = figure.key;
+  box.appendChild(el("div", figure.value_text || valueText(figure.kind, figure.value), "value"));
+  box.appendChild(el("div", figure.kind === "count" && figure.value === 1 ? singular(figure.label) : figure.label, "label"));
+  if (!previousShift) {
+    box.appendChild(el("div", "no previous shift", "change"));
+    return box;
+  }
+  const known = (v) => v !== null && v !== undefined;
+  const change = known(figure.value) && known(figure.previous) ? figure.value - figure.previous : null;
+  const line = el("div", "vs ", "previous");
+  line.append(el("span", previousShift.id, "nowrap"),
+    `: ${figure.previous_text || valueText(figure.kind, figure.previous)}`);
+  box.appendChild(line);
+  if (change !== null) {
+    let tone = "";
+    if (change && !NEUTRAL.has(figure.key)) tone = (change > 0) !== GOOD_WHEN_HIGHER.has(figure.key) ? "worse" : "better";
+    const percent = figure.percent_text && figure.percent_text !== "-" ? ` (${figure.percent_text})` : "";
+    const text = change === 0 ? "= no change" : `${change > 0 ? "▲" : "▼"} ${figure.change_text}${percent}`;
+    box.appendChild(el("div", text, `change ${tone}`));
   }
   return box;
 }
 
+// Each load has a number; the answers of a load that a later one superseded (the tab opened,
+// then a shift was asked for) are dropped, so the page shows what was asked last.
+let statsLoad = 0;
+
 async function loadStats() {
-  const message = $("stats-message");
-  message.textContent = "";
+  const load = ++statsLoad;
+  delete $("view-stats").dataset.shown;  // set again once this load has drawn everything
+  $("stats-message").textContent = "";
   try {
-    const since = isoDate(new Date(Date.now() - 7 * 86400 * 1000));
-    const glob = $("stats-estop").value.trim() || "*EMERGENCY_STOP*";
-    const all = (await apiJson(`/api/v1/stats?by=shift&since=${since}`)).items;
-    const estops = (await apiJson(`/api/v1/stats?by=shift&since=${since}&code=${encodeURIComponent(glob)}`)).items;
+    const params = new URLSearchParams({ format: "json" });
     const wanted = $("stats-shift").value.trim();
-    let index = wanted ? all.findIndex((r) => r.period === wanted) : all.length - 1;
-    if (index < 0) throw new Error(`shift ${wanted} is not within the last 7 days`);
-    const current = all[index], previous = all[index - 1];
-    const stops = (i) => (i >= 0 && estops[i] ? estops[i].activations : null);
-    $("stats-title").textContent = `Shift ${current.period} (${new Date(current.start).toLocaleString()} – ${new Date(current.end).toLocaleString()})`;
-    const plain = (v) => (v === null || v === undefined ? "–" : String(v));
-    $("figures").replaceChildren(
-      figure("e-stops (activations)", stops(index), stops(index - 1), plain),
-      figure("aborted goals", current.aborted_goals, previous && previous.aborted_goals, plain),
-      figure("activations, all codes", current.activations, previous && previous.activations, plain),
-      figure("failed reports", current.failed_reports, previous && previous.failed_reports, plain),
-      figure("fault time CONFIRMED (sum)", current.active_seconds, previous && previous.active_seconds, duration),
-      figure("MTTR", current.mttr_seconds, previous && previous.mttr_seconds, duration),
-    );
-    bars($("chart-estops"), estops, "activations", "#c62828");
-    bars($("chart-aborted"), all, "aborted_goals", "#1f5fbf");
-    const offenders = (await apiJson(`/api/v1/stats?by=shift&since=${encodeURIComponent(current.period)}&until=${encodeURIComponent(current.period)}&group_by=code`)).items
-      .filter((r) => r.activations || r.failed_reports)
-      .sort((a, b) => (b.activations - a.activations) || (b.failed_reports - a.failed_reports)).slice(0, 10);
-    $("offenders").tBodies[0].replaceChildren(...offenders.map((r) => row([r.code, r.activations, r.failed_reports, duration(r.active_seconds)])));
-    const link = $("shift-report-link");
-    link.onclick = (event) => {
+    if (wanted) params.set("shift", wanted);
+    const report = await apiJson(`/api/v1/shift-report?${params}`);
+    if (load !== statsLoad) return;
+    const shift = report.shift;
+    $("stats-title").textContent = `Shift ${shift.id}${report.in_progress ? " (in progress)" : ""}`;
+    $("stats-span").textContent = report.in_progress
+      ? `${shift.span_text} · counted up to ${clock(Date.parse(report.as_of), true)}` : shift.span_text;
+    $("stats-headline").textContent = report.headline || "";
+    $("stats-notes").replaceChildren(...(report.notes || []).map((note) => el("li", note)));
+    $("figures").replaceChildren(...report.figures.map((f) => figureBox(f, report.previous)));
+    const globs = (report.estop_codes && report.estop_codes.length) ? report.estop_codes
+      : JSON.parse(document.body.dataset.estopCodes || "[]");
+    $("estop-hint").textContent = `E-stops are activations of the codes matching ${globs.join(", ")} (the configuration's estop_codes).`;
+    const offenders = report.offenders || [];
+    $("offenders").tBodies[0].replaceChildren(...offenders.map((o) => row([
+      el("td", o.code, "text"), o.estops, o.activations, o.confirmations, o.failed_reports, duration(o.active_seconds)])));
+    $("no-offenders").hidden = offenders.length > 0;
+    // The 7 × 24 h up to the shift's end, in the calendar's wall-clock time (a local
+    // date-time in the time grammar): 21 whole shifts of a three-shift calendar.
+    const end = clock(Date.parse(shift.end));
+    const since = `${addDays(end.slice(0, 10), -7)}T${end.slice(11)}`;
+    const stats = await apiJson(`/api/v1/stats?by=shift&since=${encodeURIComponent(since)}&until=${encodeURIComponent(shift.id)}`);
+    if (load !== statsLoad) return;
+    const rows = stats.items;
+    bars($("chart-estops"), { rows, key: "estops", colour: "#c62828", one: "e-stop", many: "e-stops", highlight: shift.id });
+    bars($("chart-aborted"), { rows, key: "aborted_goals", colour: "#1f5fbf", one: "aborted goal", many: "aborted goals", highlight: shift.id });
+    $("shift-report-link").onclick = (event) => {
       event.preventDefault();
-      download(`/api/v1/shift-report?shift=${encodeURIComponent(current.period)}`, `shift-report-${current.period.replace("/", "-")}.html`)
-        .catch((error) => { message.textContent = error.message; });
+      download(`/api/v1/shift-report?shift=${encodeURIComponent(shift.id)}`, `shift-report-${shift.id.replace("/", "-")}.html`)
+        .catch((error) => showError("stats-message", error));
     };
+    $("view-stats").dataset.shown = shift.id;
   } catch (error) {
-    if (!(error instanceof AuthNeeded)) message.textContent = error.message;
+    if (load === statsLoad) showError("stats-message", error);
   }
 }
 $("stats-form").addEventListener("submit", (event) => { event.preventDefault(); loadStats(); });
 
-// -- history ---------------------------------------------------------------------------------
+// -- history: newest first, paged backwards ----------------------------------------------------
+const historyView = { params: "", before: null, shown: 0, total: null, load: 0 };
+
 function historyParams() {
   const params = new URLSearchParams();
   for (const [name, id] of [["code", "history-code"], ["since", "history-since"], ["until", "history-until"]]) {
@@ -349,39 +566,48 @@ function historyParams() {
   return params;
 }
 
-async function loadHistory(more) {
-  const message = $("history-message");
-  message.textContent = "";
-  const params = more ? new URLSearchParams(state.historyParams) : historyParams();
-  state.historyParams = params.toString();
-  params.set("limit", "100");
-  if (more && state.historyNext !== null) params.set("after_seq", String(state.historyNext));
+async function loadHistory(older) {
+  const load = older ? historyView.load : ++historyView.load;  // a new search supersedes
+  $("history-message").textContent = "";
+  const params = older ? new URLSearchParams(historyView.params) : historyParams();
+  if (!older) historyView.params = params.toString();
+  params.set("order", "desc");
+  params.set("limit", String(HISTORY_PAGE));
+  params.set("total", "true");
+  if (older) params.set("before_seq", String(historyView.before));
   try {
     const page = await apiJson(`/api/v1/history?${params}`);
+    if (load !== historyView.load) return;
     const rows = page.items.map((r) => {
       const p = r.payload;
-      const details = r.kind === "fault_reported" ? `${p.event_type} severity ${p.severity} ${p.description || ""}`
+      const details = r.kind === "fault_reported" ? `${p.event_type} ${p.description || ""}`
         : r.kind === "fault_cleared" ? `by ${p.actor}${p.reason ? ": " + p.reason : ""}`
         : r.kind === "goal_outcome" ? `${p.action} ${p.status}` : "";
-      return row([r.seq, new Date(r.occurred_at_ns / 1e6).toLocaleString(), r.kind, r.fault_code || "",
+      const severity = r.kind === "fault_reported" ? cell(severityBadge(p.severity)) : el("td");
+      const tr = row([r.seq, recordTime(r), r.kind, r.fault_code || "", severity,
         el("td", r.source_id || "", "text wide"), el("td", details, "text")]);
+      tr.dataset.seq = String(r.seq);
+      return tr;
     });
     const body = $("history-table").tBodies[0];
-    if (more) body.append(...rows); else body.replaceChildren(...rows);
-    state.historyNext = page.next_after_seq;
-    $("history-more").hidden = page.next_after_seq === null;
+    if (older) body.append(...rows); else body.replaceChildren(...rows);
+    historyView.shown = (older ? historyView.shown : 0) + rows.length;
+    historyView.before = page.next_before_seq;
+    historyView.total = page.total;
+    $("history-count").textContent = countText(historyView.shown, historyView.total);
+    $("history-older").hidden = page.next_before_seq === null;
   } catch (error) {
-    if (!(error instanceof AuthNeeded)) message.textContent = error.message;
+    if (load === historyView.load) showError("history-message", error);
   }
 }
 $("history-form").addEventListener("submit", (event) => { event.preventDefault(); loadHistory(false); });
-$("history-more").addEventListener("click", () => loadHistory(true));
+$("history-older").addEventListener("click", () => loadHistory(true));
 for (const [id, format] of [["export-csv", "csv"], ["export-jsonl", "jsonl"]]) {
   $(id).addEventListener("click", () => {
     const params = historyParams();
     params.set("format", format);
     download(`/api/v1/history?${params}`, `history.${format}`)
-      .catch((error) => { $("history-message").textContent = error.message; });
+      .catch((error) => showError("history-message", error));
   });
 }
 
@@ -390,11 +616,10 @@ const loaded = new Set();
 function showView(name) {
   document.querySelectorAll(".tab").forEach((tab) => tab.classList.toggle("active", tab.dataset.view === name));
   document.querySelectorAll(".view").forEach((view) => { view.hidden = view.id !== `view-${name}`; });
-  if (!loaded.has(name)) {
-    loaded.add(name);
-    if (name === "stats") loadStats();
-    if (name === "history") loadHistory(false);
-  }
+  if (name === "stats" && !loaded.has(name)) loadStats();
+  // The History tab opens at the newest record of the last search, every time it is shown.
+  if (name === "history") loadHistory(false);
+  loaded.add(name);
 }
 document.querySelectorAll(".tab").forEach((tab) => tab.addEventListener("click", () => showView(tab.dataset.view)));
 
