@@ -1,5 +1,6 @@
-"""`faultledger http` (the HTTP API and dashboard without ROS) and `faultledger token create`.
-Registered by cli/main.py; docs/http.md is the reference."""
+"""`faultledger http` (the HTTP API and dashboard without ROS) and `faultledger token create`
+(`token list` and `token revoke`: cli/tokens.py). Registered by cli/main.py; docs/http.md is
+the reference."""
 
 from __future__ import annotations
 
@@ -17,10 +18,11 @@ from faultledger.cli.options import (
     settings_for,
 )
 from faultledger.cli.safe_text import printable
+from faultledger.cli.tokens import PICKUP, token_file, token_list, token_revoke
 from faultledger.errors import FaultLedgerError
 from faultledger.service.bootstrap import Role, open_ledger
-from faultledger.service.tokens import Role as TokenRole
-from faultledger.service.tokens import issue
+from faultledger.service.config import TOKEN_NAME_RULE
+from faultledger.service.tokens import check_name, check_role, issue, parse_lifetime, utc_text
 from faultledger.store.database import describe
 
 ListenOption = Annotated[str | None, typer.Option(
@@ -68,24 +70,45 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
 
 @token_app.command("create")
 def token_create(
-    name: Annotated[str, typer.Option("--name", help="Who holds it; the actor of its changes.")],
-    role: Annotated[TokenRole, typer.Option(
-        "--role", help="viewer (reads), reporter (POST reports only), operator (reads, "
+    name: Annotated[str, typer.Option(
+        "--name", metavar="NAME", help="Who holds it; the actor of its changes. "
+        f"{TOKEN_NAME_RULE}.")],
+    role: Annotated[str, typer.Option(
+        "--role", metavar="ROLE",
+        help="viewer (reads), reporter (POST reports only), operator (reads, "
         "reports, clears) or admin (everything).")],
     config: ConfigOption = None,
     file: Annotated[Path | None, typer.Option(
-        "--file", help="Token file to add it to (default: the config's http.tokens_file, "
+        "--file", metavar="FILE",
+        help="Token file to add it to (default: the config's http.tokens_file, "
         "var/http-tokens.yaml).")] = None,
+    expires: Annotated[str | None, typer.Option(
+        "--expires", metavar="DURATION",
+        help="Valid for this long, e.g. 12h or 30d (s, m, h, d); default: "
+        "no expiry.")] = None,
 ) -> None:
-    """Issue a token: printed once, only its SHA-256 is stored (file mode 0600)."""
+    """Issue a token: printed once, only its SHA-256 is stored (file mode 0600).
+
+    A running server accepts it within 2 s.
+    """
     settings = settings_for(config)
-    path = file or settings.http.tokens_file
-    if path is None:
-        fail("no token file: give --file or set http.tokens_file in the config")
     try:
-        token = issue(path, name, role)
+        check_name(name)
+        token_role = check_role(role)
+        lifetime = None if expires is None else parse_lifetime(expires)
+    except FaultLedgerError as error:
+        fail(str(error))
+    path = token_file(settings, file)
+    try:
+        token, entry = issue(path, name, token_role, lifetime)
     except FaultLedgerError as error:
         fail(str(error))
     typer.echo(token)
-    typer.echo(printable(f"token {name!r} ({role.value}) added to {path}; it is shown only "
-                         "now. Restart the server to use it."), err=True)
+    until = ("no expiry" if entry.expires_at is None
+             else f"expires {utc_text(entry.expires_at)}")
+    typer.echo(printable(f"token {name!r} ({token_role.value}, {until}) added to {path}; it "
+                         f"is shown only now; {PICKUP.format('accepts it')}."), err=True)
+
+
+token_app.command("list")(token_list)
+token_app.command("revoke")(token_revoke)

@@ -15,12 +15,12 @@ from fastapi_offline import FastAPIOffline
 
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.http import errors, medkit
-from faultledger.http.auth import Authorizer, BodyLimit
+from faultledger.http.auth import Authorizer, BodyLimit, Guarded
 from faultledger.http.context import Context
 from faultledger.http.stream import StreamHub
 from faultledger.service.config import HttpSettings
 from faultledger.service.ledger import FaultLedger
-from faultledger.service.tokens import TokenBook
+from faultledger.service.tokens import TokenBook, TokenWatcher
 from faultledger.version import version
 
 DESCRIPTION = (
@@ -29,31 +29,45 @@ DESCRIPTION = (
     "sources without ROS, a resumable event stream and Prometheus metrics."
 )
 
+DOCS_URL = "/docs"
 DOCS_ASSETS = "/static-offline-docs"
 """Where Swagger UI's script, style sheet and icon are served (fastapi-offline's copies)."""
 
 
 def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalendar,
-               tokens: TokenBook, *, read_only: bool = False) -> FastAPI:
+               tokens: TokenBook, *, read_only: bool = False, loopback: bool = True
+               ) -> FastAPI:
+    """``tokens`` are those in force at start; while the app runs a ``TokenWatcher`` follows
+    the token file. ``loopback``: the server listens on loopback only, so it is open (every
+    request anonymous) whenever no token is configured."""
     hub = StreamHub(ledger, medkit.stream_data, settings.stream_buffer)
-    context = Context(ledger, settings, calendar, Authorizer(tokens), hub, read_only)
+    authorizer = Authorizer(tokens, open_without_tokens=loopback)
+    context = Context(ledger, settings, calendar, authorizer, hub, read_only)
+    watcher = TokenWatcher(settings, authorizer.replace)
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         hub.start()
+        watcher.start()
         try:
             yield
         finally:
+            watcher.stop()
             hub.stop()
 
     # /docs (Swagger UI) from assets this server serves (fastapi-offline), not FastAPI's
     # CDN: a robot has no internet. No /redoc: ReDoc's page fetches Redocly's logo from a CDN.
     app = FastAPIOffline(title="faultledger", version=version(), description=DESCRIPTION,
-                         lifespan=lifespan, static_url=DOCS_ASSETS, redoc_url=None)
+                         lifespan=lifespan, static_url=DOCS_ASSETS, docs_url=DOCS_URL,
+                         redoc_url=None)
     app.state.context = context
     errors.install(app)
     from faultledger.http.routes import register  # the routes import the app's modules
     register(app, context)
+    # The API's description needs a reader's token, as the API does (the docs' script and
+    # style sheet under DOCS_ASSETS are Swagger UI's own and describe nothing: left open).
+    app.add_middleware(Guarded, authorizer=authorizer,
+                       paths=frozenset(p for p in (app.openapi_url, DOCS_URL) if p))
     if settings.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins,
                            allow_methods=["GET", "POST", "DELETE"],

@@ -65,7 +65,8 @@ class HttpServer:
         tokens = TokenBook(configured(settings))
         check_exposure(self.host, tokens)
         self.tokens = tokens
-        self.app = create_app(ledger, settings, calendar, tokens, read_only=read_only)
+        self.app = create_app(ledger, settings, calendar, tokens, read_only=read_only,
+                              loopback=is_loopback(self.host))
         self._socket = _bind(self.host, self.port)
         self.port = self._socket.getsockname()[1]
         config = uvicorn.Config(self.app, log_level="warning", access_log=False,

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from faultledger.domain.policy import Policy
 from faultledger.domain.shifts import ShiftCalendar
@@ -47,15 +48,32 @@ class AnchorSettings(BaseModel):
     """Newest anchor files `serve` keeps in ``directory``; None: all."""
 
 
+TOKEN_NAME_PATTERN = r"^[A-Za-z0-9_.@-]{1,64}$"
+TOKEN_NAME_RULE = "1..64 characters: letters, digits, _ . @ -"
+
+
 class TokenEntry(BaseModel):
     """One HTTP bearer token: only its SHA-256 is stored (``faultledger token create``)."""
 
     model_config = ConfigDict(extra="forbid")
 
-    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.@-]+$")
+    name: str = Field(min_length=1, max_length=64, pattern=TOKEN_NAME_PATTERN)
     """Who holds it: recorded as the actor of every change made with it."""
     role: Literal["viewer", "reporter", "operator", "admin"]
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
+    expires_at: datetime | None = None
+    """When it stops working (UTC); None: never. A time without a zone is UTC."""
+    created_at: datetime | None = None
+    """When `token create` issued it (UTC); None for entries written before it was kept."""
+
+    @field_validator("expires_at", "created_at")
+    @classmethod
+    def _utc(cls, value: datetime | None) -> datetime | None:
+        if value is None:
+            return None
+        if value.tzinfo is None:
+            return value.replace(tzinfo=UTC)
+        return value.astimezone(UTC)
 
 
 class HttpSettings(BaseModel):
@@ -67,7 +85,8 @@ class HttpSettings(BaseModel):
     """[HOST:]PORT; the command line's --listen / --http wins."""
     tokens: list[TokenEntry] = Field(default_factory=list)
     tokens_file: Path | None = Path("var/http-tokens.yaml")
-    """Where `faultledger token create` adds tokens; read at start when it exists."""
+    """Where `faultledger token create` adds tokens; read at start when it exists, and again
+    within a second or two whenever it changes (create, revoke)."""
     cors_origins: list[str] = Field(default_factory=list)
     """Origins allowed to call the API from a browser; empty: none (CORS closed)."""
     max_body_bytes: int = Field(default=1024 * 1024, ge=1024, le=64 * 1024 * 1024)
