@@ -71,12 +71,12 @@ def expected(scenario: Scenario, **query: object) -> list[StatsRow]:
 def test_the_table_shows_aborted_goals_next_to_activations(scenario: Scenario) -> None:
     result = invoke("stats", *scenario.cli(*RANGE))
     assert result.exit_code == 0, result.stderr
-    assert header(result.stdout)[2:5] == ["failed", "activations", "aborted goals"]
+    assert header(result.stdout)[2:6] == ["e-stops", "aborted goals", "activations", "failed"]
     shown = {row[0]: row for row in rich_rows(result.stdout)}
-    assert shown[NIGHT][3:5] == [str(presses(NIGHT_START, NIGHT_END)),
-                                 str(goals(NIGHT_START, NIGHT_END))]
-    assert shown[PREVIOUS_NIGHT][4] == str(goals(PREVIOUS_START, PREVIOUS_END)) == "1"
-    assert shown[NIGHT][4] == "3"  # the repeat of night-1 is counted once
+    assert shown[NIGHT][3:5] == [str(goals(NIGHT_START, NIGHT_END)),
+                                 str(presses(NIGHT_START, NIGHT_END))]
+    assert shown[PREVIOUS_NIGHT][3] == str(goals(PREVIOUS_START, PREVIOUS_END)) == "1"
+    assert shown[NIGHT][3] == "3"  # the repeat of night-1 is counted once
 
 
 def test_json_and_csv_carry_all_three_goal_figures(scenario: Scenario) -> None:
@@ -100,8 +100,8 @@ def test_json_and_csv_carry_all_three_goal_figures(scenario: Scenario) -> None:
 def test_group_by_action_shows_the_goal_figures_per_action(scenario: Scenario) -> None:
     result = invoke("stats", "--group-by", "action", *scenario.cli(*RANGE))
     assert result.exit_code == 0, result.stderr
-    assert header(result.stdout) == ["period", "local time", "action", "aborted goals",
-                                     "canceled goals", "succeeded goals"]
+    assert header(result.stdout) == ["period", "local time (Europe/Berlin)", "action",
+                                     "aborted goals", "canceled goals", "succeeded goals"]
     shown = [(row[0], row[2], row[3:]) for row in rich_rows(result.stdout)]
     assert (NIGHT, NAV, ["3", "0", "0"]) in shown
     assert (NIGHT, PICK, ["0", "1", "1"]) in shown
@@ -129,13 +129,14 @@ def test_report_shift_compares_aborted_goals_with_the_previous_night(
                                                   str(html)))
     assert result.exit_code == 0, result.stderr
     figures = {row[0]: row[1:] for row in rich_rows(result.stdout, "key figures")}
-    assert list(figures)[:3] == ["failed reports", "activations", "aborted goals"]
+    assert list(figures)[:4] == ["e-stops", "aborted goals", "activations (all faults)",
+                                 "failed reports"]
     assert figures["aborted goals"] == ["3", "1", "+2", "+200.0 %"]
     hours = rich_rows(result.stdout, "per hour")
     with scenario.ledger() as ledger:
         per_hour = ledger.stats("hour", NIGHT, NIGHT, calendar=scenario.calendar, as_of=AS_OF)
-    assert [row[5] for row in hours] == [str(r.aborted_goals) for r in per_hour]
-    assert sum(int(row[5]) for row in hours) == 3
+    assert [row[3] for row in hours] == [str(r.aborted_goals) for r in per_hour]
+    assert sum(int(row[3]) for row in hours) == 3
     page = html.read_text(encoding="utf-8")
     assert ('<td class="text">aborted goals</td><td>3</td><td>1</td>'
             '<td class="worse">+2</td><td class="worse">+200.0 %</td>') in page

@@ -76,14 +76,14 @@ def test_the_table_shows_the_main_figures_of_every_shift(scenario: Scenario) -> 
     for row in rows:
         cells = shown[row.period.id]
         assert cells[2:] == [
-            str(row.failed_reports), str(row.activations), str(row.aborted_goals),
-            str(row.confirmations), str(row.heals), str(row.clears),
+            str(row.estops), str(row.aborted_goals), str(row.activations),
+            str(row.failed_reports), str(row.confirmations), str(row.heals), str(row.clears),
             duration(row.active_seconds),
             duration(row.mttr_seconds), f"{row.flood_percent:.1f}", str(row.chattering_codes),
             str(row.stale_codes)]
     night = shown[NIGHT]
     assert night[1] == "2026-11-21 22:00–2026-11-22 06:00"  # local time of the calendar
-    assert night[3] == str(presses(berlin(21, 22, 0), berlin(22, 6, 0)))  # activations
+    assert night[4] == str(presses(berlin(21, 22, 0), berlin(22, 6, 0)))  # activations
     assert "Europe/Berlin" in result.stdout
 
 

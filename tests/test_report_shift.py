@@ -168,8 +168,10 @@ def test_the_hours_chart_has_one_row_per_local_hour(scenario: Scenario) -> None:
                                          "03:00", "04:00", "05:00"]
     with scenario.ledger() as ledger:
         rows = ledger.stats("hour", NIGHT, NIGHT, calendar=scenario.calendar, as_of=AS_OF)
-    assert [(row[1], row[3]) for row in hours] == [
-        (str(r.activations), str(r.confirmations)) for r in rows]
+    # hour, e-stops, bar, aborted goals, bar, activations, bar, confirmations (as the HTML)
+    assert [(row[1], row[3], row[5], row[7]) for row in hours] == [
+        (str(r.estops), str(r.aborted_goals), str(r.activations), str(r.confirmations))
+        for r in rows]
 
 
 def test_default_shift_is_the_last_completed_one(scenario: Scenario) -> None:

@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from faultledger.cli import render
-from faultledger.cli.options import ConfigOption, DbOption, opened, prepare
+from faultledger.cli.options import HELP_MARKUP, ConfigOption, DbOption, opened, prepare
 from faultledger.cli.options import fail as _fail
 from faultledger.errors import FaultLedgerError
 from faultledger.service import anchors
@@ -22,16 +22,19 @@ from faultledger.service.config import config_path, load_settings
 from faultledger.service.output_files import OutputFileError, check_target, write_output
 
 anchor_app = typer.Typer(
-    help="Signed anchors of the log head (Ed25519): tamper evidence beyond the hash chain. "
-    "Without a subcommand: the same as `anchor export`.",
+    help="Signed anchors of the log head (Ed25519).\n\nTamper evidence beyond the hash "
+    "chain. Without a subcommand: the same as `anchor export`.",
     invoke_without_command=True,
+    rich_markup_mode=HELP_MARKUP,
 )
 
 KeyOption = Annotated[Path | None, typer.Option(
-    "--key", help="Ed25519 private key (PEM) to sign with (default: the config's anchors.key). "
+    "--key", metavar="FILE",
+    help="Ed25519 private key (PEM) to sign with (default: the config's anchors.key). "
     "Keep it outside the database.")]
 OutputOption = Annotated[Path | None, typer.Option(
-    "--output", "-o", help="Write the anchor to this new file (mode 0640; default: stdout).")]
+    "--output", "-o", metavar="FILE",
+    help="Write the anchor to this new file (mode 0640; default: stdout).")]
 ForceOption = Annotated[bool, typer.Option(
     "--force", help="Replace an existing output file.")]
 
@@ -66,9 +69,12 @@ def export(
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Sign the head of the log (seq, hash, when it was recorded, when it was anchored) and
-    print the anchor as JSON, or write it to --output. The chain is checked first: a broken
-    one, or an empty log, is not anchored (exit 1)."""
+    """Sign the head of the log and print the anchor as JSON.
+
+    The anchor holds the seq, the hash, when it was recorded and when it was anchored; it is
+    printed, or written to --output. The chain is checked first: a broken one, or an empty
+    log, is not anchored (exit 1).
+    """
     try:
         key_path = key or load_settings(config_path(config)).anchors.key
         if key_path is None:
@@ -102,14 +108,18 @@ def export(
 @anchor_app.command("keygen")
 def keygen(
     private_key: Annotated[Path, typer.Option(
-        "--private-key", help="New private key file (PEM, mode 0600). Keep it off the "
+        "--private-key", metavar="FILE",
+        help="New private key file (PEM, mode 0600). Keep it off the "
         "robot's data disk if the robot itself is not trusted.")],
     public_key: Annotated[Path, typer.Option(
-        "--public-key", help="New public key file (PEM): what `verify --public-key` trusts.")],
+        "--public-key", metavar="FILE",
+        help="New public key file (PEM): what `verify --public-key` trusts.")],
     force: Annotated[bool, typer.Option("--force", help="Replace existing key files.")] = False,
 ) -> None:
-    """Generate an Ed25519 key pair for anchors. Neither file is written when one exists
-    (unless --force)."""
+    """Generate an Ed25519 key pair for anchors.
+
+    Neither file is written when one exists (unless --force).
+    """
     if private_key.absolute() == public_key.absolute():
         _fail("the private and the public key need two different files")
     key, private_pem, public_pem = anchors.new_key_pair()

@@ -11,7 +11,8 @@ import json
 import os
 import sys
 from collections.abc import Iterator
-from datetime import UTC
+from dataclasses import dataclass
+from datetime import UTC, datetime
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
@@ -34,9 +35,11 @@ from faultledger.cli.options import (
 )
 from faultledger.cli.options import fail as _fail
 from faultledger.cli.safe_text import cell
-from faultledger.domain.clock import iso_ns
+from faultledger.domain.clock import from_ns, iso_ns, to_ns
 from faultledger.domain.events import KINDS
+from faultledger.domain.fault import Fault
 from faultledger.domain.integrity import GENESIS_HASH
+from faultledger.domain.shifts import ShiftCalendar
 from faultledger.errors import FaultLedgerError
 from faultledger.service.anchors import (
     AnchorCheck,
@@ -76,28 +79,32 @@ def register(app: typer.Typer) -> None:
 
 def history(
     code: Annotated[list[str] | None, typer.Option(
-        "--code", help="Fault code, or a case-sensitive glob such as 'HW_*_EMERGENCY_STOP' "
-        "(repeatable: any of them).")] = None,
-    source: Annotated[str | None, typer.Option("--source", help="Exact source id.")] = None,
+        "--code", metavar="GLOB", help="Fault code, or a case-sensitive glob such as "
+        "'HW_*_EMERGENCY_STOP' (repeatable: any of them).")] = None,
+    source: Annotated[str | None, typer.Option("--source", metavar="ID",
+                                               help="Exact source id.")] = None,
     since: Annotated[str | None, typer.Option(
-        "--since", help=f"occurred_at from (inclusive): {TIME_HELP}.")] = None,
+        "--since", metavar="TIME", help=f"occurred_at from (inclusive): {TIME_HELP}.")] = None,
     until: Annotated[str | None, typer.Option(
-        "--until", help="occurred_at before (exclusive); like --since, a shift id means its "
-        "end.")] = None,
+        "--until", metavar="TIME", help="occurred_at before (exclusive); like --since, a "
+        "shift id means its end.")] = None,
     from_seq: Annotated[int | None, typer.Option(
-        "--from-seq", min=1, help="First seq (inclusive).")] = None,
+        "--from-seq", min=1, metavar="SEQ", help="First seq (inclusive).")] = None,
     to_seq: Annotated[int | None, typer.Option(
-        "--to-seq", min=1, help="Last seq (inclusive).")] = None,
+        "--to-seq", min=1, metavar="SEQ", help="Last seq (inclusive).")] = None,
     kind: Annotated[list[str] | None, typer.Option(
-        "--kind", help=f"Record kind (repeatable): {', '.join(KINDS)}.")] = None,
-    limit: Annotated[int | None, typer.Option("--limit", min=1,
+        "--kind", metavar="KIND", help=f"Record kind (repeatable): {', '.join(KINDS)}.")
+    ] = None,
+    limit: Annotated[int | None, typer.Option("--limit", min=1, metavar="N",
                                               help="At most this many records.")] = None,
     fmt: Annotated[Format | None, typer.Option(
-        "--format", help="table (default), csv or jsonl (JSON Lines).")] = None,
+        "--format", metavar="FORMAT", help="table (default), csv or jsonl (JSON Lines).")
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Same as --format jsonl.")] = False,
     as_csv: Annotated[bool, typer.Option("--csv", help="Same as --format csv.")] = False,
     output: Annotated[Path | None, typer.Option(
-        "--output", "-o", help="Write the export to this file (default: stdout); an existing "
+        "--output", "-o", metavar="FILE",
+        help="Write the export to this file (default: stdout); an existing "
         "file is kept unless --force.")] = None,
     force: Annotated[bool, typer.Option(
         "--force", help="Replace an existing --output file.")] = False,
@@ -106,8 +113,12 @@ def history(
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """The audit history: log records in seq order; CSV/JSON Lines carry every stored column
-    and hash, so the chain can be recomputed from the export alone."""
+    """The audit history: log records in seq order.
+
+    The table shows times in the calendar's zone; CSV/JSON Lines carry every stored column
+    and hash (times in ISO 8601 with their offset), so the chain can be recomputed from the
+    export alone.
+    """
     chosen = _output_format(fmt, as_json, as_csv)
     _check_seq_range(from_seq, to_seq)
     if output is not None and chosen is Format.table:
@@ -128,7 +139,8 @@ def history(
         if chosen is Format.table:
             records = ledger.history(**filters)
             out = render.console(wide=wide)
-            out.print(render.history_table(records, render.fit_width(out, wide)))
+            out.print(render.history_table(records, setup.calendar,
+                                           render.fit_width(out, wide)))
             return
         rows = export_history(ledger, **filters)
         writer = write_csv if chosen is Format.csv else write_jsonl
@@ -139,32 +151,38 @@ def history(
 
 def verify(
     from_seq: Annotated[int | None, typer.Option(
-        "--from-seq", min=1, help="First seq of the segment (its predecessor's stored hash "
+        "--from-seq", min=1, metavar="SEQ",
+        help="First seq of the segment (its predecessor's stored hash "
         "is the anchor).")] = None,
     to_seq: Annotated[int | None, typer.Option(
-        "--to-seq", min=1, help="Last seq of the segment (inclusive).")] = None,
+        "--to-seq", min=1, metavar="SEQ", help="Last seq of the segment (inclusive).")] = None,
     since: Annotated[str | None, typer.Option(
-        "--since", help=f"Segment from the first record recorded at or after this: "
+        "--since", metavar="TIME", help=f"Segment from the first record recorded at or after this: "
         f"{TIME_HELP}.")] = None,
     until: Annotated[str | None, typer.Option(
-        "--until", help="Segment up to the last record recorded at or before this (the "
+        "--until", metavar="TIME",
+        help="Segment up to the last record recorded at or before this (the "
         "prefix `state-at` uses); a shift id means its end.")] = None,
     anchor_file: Annotated[list[Path] | None, typer.Option(
-        "--anchor", help="Signed anchor file (repeatable; `faultledger anchor`): its record "
+        "--anchor", metavar="FILE",
+        help="Signed anchor file (repeatable; `faultledger anchor`): its record "
         "must be stored with the anchored hash, the chain intact up to it. Default: the newest "
         "in the config's anchors.directory when anchors.public_key is set too.")] = None,
     public_key: Annotated[Path | None, typer.Option(
-        "--public-key", help="The trusted Ed25519 public key (PEM) anchors must be signed "
+        "--public-key", metavar="FILE",
+        help="The trusted Ed25519 public key (PEM) anchors must be signed "
         "with (default: the config's anchors.public_key).")] = None,
     as_json: JsonOption = False,
     shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Check the hash chain (and, for the whole log, that the projections equal a full replay
-    and SQLite's integrity check passes); with a range, only that segment, from the stored
-    hash of the record before it. With anchors, also that the log still holds what they
-    signed."""
+    """Check the hash chain and the projections (a full replay).
+
+    For the whole log, also that the projections equal a full replay and SQLite's integrity
+    check passes; with a range, only that segment, from the stored hash of the record before
+    it. With anchors, also that the log still holds what they signed.
+    """
     if (since is not None or until is not None) and (from_seq is not None or to_seq is not None):
         _fail("give a seq range (--from-seq/--to-seq) or a time range (--since/--until), "
               "not both")
@@ -217,7 +235,8 @@ def verify(
     if report_.ok and not as_json:
         for m in matched:
             render.say(f"anchor {m.path}: seq {m.anchor.seq} hash {m.anchor.hash} "
-                       f"(made {iso_ns(m.anchor.anchored_at_ns)}, key "
+                       f"(made {render.zoned(from_ns(m.anchor.anchored_at_ns), setup.calendar)}"
+                       f", key "
                        f"{m.anchor.key_id}) matches")
     if not report_.ok:
         raise typer.Exit(1)
@@ -233,23 +252,81 @@ def state_at(
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """The fault table (every status) as of a seq or a time: a replay of that log prefix, with
-    the hash of its last record, which anchors it."""
+    """The fault table (every status) as of a seq or a time.
+
+    A replay of that log prefix, with the hash of its last record, which anchors it. A time
+    means what the ledger knew then: the records recorded at or before it.
+    """
     setup = prepare(db, config, shifts=shifts)
     moment = parse_moment(when, "WHEN|SEQ", setup.calendar)
     with opened(setup) as ledger:
-        seq = seq_recorded_by(ledger, moment)
-        faults = ledger.state_at(seq)
-        digest = _stored_hash(ledger, seq)
+        prefix = log_prefix(ledger, moment, setup.calendar, strict=True)
+        digest = _stored_hash(ledger, prefix.seq)
     at = None if isinstance(moment, int) else moment.astimezone(UTC).isoformat()
     if as_json:
-        typer.echo(json.dumps({"seq": seq, "hash": digest, "at": at,
-                               "faults": [render.fault_dict(f) for f in faults]}, indent=2))
-        return
-    title = f"faults as of seq {seq}" + (f" (recorded at or before {at})" if at else "")
-    out = render.console(wide=wide)
-    out.print(render.faults_table(faults, title, render.fit_width(out, wide)))
-    out.print(cell(f"seq {seq} hash {digest}"))
+        typer.echo(json.dumps({"seq": prefix.seq, "hash": digest, "at": at,
+                               "faults": [render.fault_dict(f) for f in prefix.faults]},
+                              indent=2))
+    else:
+        out = render.console(wide=wide)
+        out.print(render.faults_table(prefix.faults, prefix.title, setup.calendar,
+                                      render.fit_width(out, wide)))
+        out.print(cell(f"seq {prefix.seq} hash {digest}"))
+    for note in prefix.notes:
+        render.note(note)
+
+
+@dataclass(frozen=True, slots=True)
+class Prefix:
+    """The fault table after a prefix of the log (`state-at`, `list --at`)."""
+
+    seq: int
+    faults: list[Fault]
+    title: str
+    notes: list[str]
+
+
+LATE_SHOWN = 1000
+"""Up to how many late records the note counts exactly."""
+
+
+def log_prefix(ledger: FaultLedger, moment: datetime | int, calendar: ShiftCalendar, *,
+               strict: bool = False) -> Prefix:
+    """The table after seq ``moment``, or after the records recorded by a time, with the notes
+    a person needs to read it: records recorded later that occurred before that time (the
+    table is by recording time), nothing recorded yet, and (``list --at``, not ``strict``) a
+    seq past the end of the log, which shows the current table."""
+    notes: list[str] = []
+    if isinstance(moment, int):
+        if strict:
+            seq = seq_recorded_by(ledger, moment)  # a seq past the end is an error
+            return Prefix(seq, ledger.state_at(seq), f"faults as of seq {seq}", notes)
+        faults = ledger.state_at(moment)  # checks the number; past the end: the whole log
+        head = ledger.last_seq
+        if moment > head:
+            notes.append(f"seq {moment} is past the end of the log (its last seq is {head}): "
+                         f"this is the table after seq {head}, the current one")
+        seq = min(moment, head)
+        return Prefix(seq, faults, f"faults as of seq {seq}", notes)
+    seq = seq_recorded_by(ledger, moment)
+    shown = render.zoned(moment, calendar)
+    late = ledger.history(until=to_ns(moment) + 1, from_seq=seq + 1, limit=LATE_SHOWN + 1)
+    if late:
+        count = (f"more than {LATE_SHOWN} records" if len(late) > LATE_SHOWN
+                 else "1 record" if len(late) == 1 else f"{len(late)} records")
+        local = moment.astimezone(calendar.zone).isoformat(timespec="seconds")
+        notes.append(f"the table is by recording time (what the ledger knew at {shown}): "
+                     f"{count} recorded later occurred before it (sent late or back-dated, "
+                     f"first seq {late[0].seq}) and are not in it; what occurred before it: "
+                     f"faultledger history --until {local}")
+    elif seq == 0:
+        first = ledger.history(from_seq=1, to_seq=1)
+        if first:
+            notes.append(f"nothing was recorded at or before {shown}: the log's first record "
+                         f"was recorded at "
+                         f"{render.zoned(from_ns(first[0].recorded_at_ns), calendar)}")
+    return Prefix(seq, ledger.state_at(seq),
+                  f"faults as of seq {seq} (recorded at or before {shown})", notes)
 
 
 # -- export ----------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ from faultledger.cli import audit, render
 from faultledger.cli import stats as stats_commands
 from faultledger.cli import web as web_commands
 from faultledger.cli.options import (
+    HELP_MARKUP,
     TIME_HELP,
     ConfigOption,
     DbOption,
@@ -43,8 +44,10 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
+    rich_markup_mode=HELP_MARKUP,
 )
-db_app = typer.Typer(help="Schema migrations (Alembic).", no_args_is_help=True)
+db_app = typer.Typer(help="Schema migrations (Alembic).", no_args_is_help=True,
+                     rich_markup_mode=HELP_MARKUP)
 app.add_typer(db_app, name="db")
 
 STATUSES = ", ".join(s.value for s in FaultStatus)
@@ -82,14 +85,18 @@ def parse_severity(text: str) -> int:
 
 @app.command()
 def report(
-    fault_code: Annotated[str, typer.Argument(help="Fault code, e.g. MOTOR_OVERHEAT.")],
-    event_type: Annotated[str, typer.Argument(help="FAILED or PASSED (or 0/1).")],
-    severity: Annotated[str, typer.Option("--severity", "-s",
+    fault_code: Annotated[str, typer.Argument(metavar="FAULT_CODE",
+                                              help="Fault code, e.g. MOTOR_OVERHEAT.")],
+    event_type: Annotated[str, typer.Argument(metavar="EVENT_TYPE",
+                                              help="FAILED or PASSED (or 0/1).")],
+    severity: Annotated[str, typer.Option("--severity", "-s", metavar="LEVEL",
                                           help="0-3 or INFO/WARN/ERROR/CRITICAL.")] = "ERROR",
-    description: Annotated[str, typer.Option("--description", "-d")] = "",
-    source: Annotated[str, typer.Option("--source", help="Reporting source id.")] = "/cli",
+    description: Annotated[str, typer.Option("--description", "-d", metavar="TEXT",
+                                             help="What happened, for people.")] = "",
+    source: Annotated[str, typer.Option("--source", metavar="ID",
+                                        help="Reporting source id.")] = "/cli",
     at: Annotated[str | None, typer.Option(
-        "--at", help=f"When it happened: {TIME_HELP}. Default: now.")] = None,
+        "--at", metavar="TIME", help=f"When it happened: {TIME_HELP}. Default: now.")] = None,
     shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
@@ -110,11 +117,16 @@ def report(
 @app.command("list")
 def list_faults(
     status: Annotated[list[str] | None, typer.Option(
-        "--status", help="Status to include (repeatable). Default: CONFIRMED.")] = None,
+        "--status", metavar="STATUS",
+        help="Status to include (repeatable). Default: CONFIRMED.")] = None,
     all_statuses: Annotated[bool, typer.Option("--all", help="Every status.")] = False,
-    severity: Annotated[str | None, typer.Option("--severity", "-s")] = None,
+    severity: Annotated[str | None, typer.Option(
+        "--severity", "-s", metavar="LEVEL",
+        help="Only this severity: 0-3 or INFO/WARN/ERROR/CRITICAL.")] = None,
     at: Annotated[str | None, typer.Option(
-        "--at", help=f"Show the table as it was at a seq number or a time: {TIME_HELP}.")
+        "--at", metavar="SEQ|TIME",
+        help=f"The table (every status) as the ledger knew it after a seq number, or after "
+        f"the records recorded by a time (by recording time, like state-at): {TIME_HELP}.")
     ] = None,
     as_json: JsonOption = False,
     wide: WideOption = False,
@@ -122,16 +134,21 @@ def list_faults(
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """List faults (CONFIRMED by default, like the ROS list_faults service)."""
+    """List the faults: CONFIRMED ones unless --status/--all say.
+
+    Like the ROS ~/list_faults service; --at shows the table of an earlier seq or time.
+    """
     for name in status or []:
         if name.strip().upper() not in FaultStatus.__members__:
             fail(f"unknown status {printable(name)!r}; valid statuses: {STATUSES}")
     setup = prepare(db, config, shifts=shifts)
-    moment = None if at is None else parse_moment(at, "--at", setup.calendar)
+    calendar = setup.calendar
+    moment = None if at is None else parse_moment(at, "--at", calendar)
+    notes: list[str] = []
     with opened(setup) as ledger:
         if moment is not None:
-            faults = ledger.state_at(moment)
-            title = f"faults at {at}"
+            prefix = audit.log_prefix(ledger, moment, calendar)
+            faults, title, notes = prefix.faults, prefix.title, prefix.notes
         else:
             statuses = ([s.value for s in FaultStatus] if all_statuses
                         else [name.strip().upper() for name in status or []])
@@ -142,20 +159,27 @@ def list_faults(
         typer.echo(json.dumps([render.fault_dict(f) for f in faults], indent=2))
     else:
         out = render.console(wide=wide)
-        out.print(render.faults_table(faults, title, render.fit_width(out, wide)))
+        out.print(render.faults_table(faults, title, calendar, render.fit_width(out, wide)))
+    for note in notes:
+        render.note(note)
 
 
 @app.command()
 def show(
-    fault_code: str,
+    fault_code: Annotated[str, typer.Argument(metavar="FAULT_CODE", help="The fault code.")],
     as_json: JsonOption = False,
     wide: WideOption = False,
     shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Show one fault (any status), its status transitions and who last cleared it, why."""
-    with opened(prepare(db, config, shifts=shifts)) as ledger:
+    """Show one fault, its status transitions and its last clear.
+
+    Any status, also CLEARED; who cleared it last, and why.
+    """
+    setup = prepare(db, config, shifts=shifts)
+    calendar = setup.calendar
+    with opened(setup) as ledger:
         lookup = ledger.lookup_fault(fault_code)
         if lookup.fault is None:
             fail(lookup.message, 1)
@@ -180,19 +204,20 @@ def show(
         return
     out = render.console(wide=wide)
     width = render.fit_width(out, wide)
-    out.print(render.faults_table([lookup.fault], f"fault {fault_code}", width))
-    if cleared is not None:
+    out.print(render.faults_table([lookup.fault], f"fault {fault_code}", calendar, width))
+    if cleared is not None and last is not None:
         reason = cleared["reason"] or "(no reason given)"
-        out.print(cell(f"last cleared {render.short(last.occurred_at if last else None)} UTC "
+        out.print(cell(f"last cleared {render.zoned(last.occurred_at, calendar)} "
                        f"by {cleared['by']}: {reason}"))
-    out.print(render.transitions_table(moves, width, reasons))
+    out.print(render.transitions_table(moves, calendar, width, reasons))
 
 
 @app.command()
 def clear(
-    fault_code: str,
-    actor: Annotated[str | None, typer.Option(help="Who clears (default cli:$USER).")] = None,
-    reason: Annotated[str, typer.Option(help="Why, for the audit trail.")] = "",
+    fault_code: Annotated[str, typer.Argument(metavar="FAULT_CODE", help="The fault code.")],
+    actor: Annotated[str | None, typer.Option(
+        metavar="WHO", help="Who clears (default cli:$USER).")] = None,
+    reason: Annotated[str, typer.Option(metavar="TEXT", help="Why, for the audit trail.")] = "",
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
@@ -258,13 +283,15 @@ def serve(
         "--follower", help="Serve reads only, as /fault_manager_follower, next to a running "
         "/fault_manager on the same database; reports and clears are refused.")] = False,
     http: Annotated[str | None, typer.Option(
-        "--http", help="Also serve the HTTP API and dashboard on [HOST:]PORT (e.g. 8080 or "
+        "--http", metavar="[HOST:]PORT",
+        help="Also serve the HTTP API and dashboard on [HOST:]PORT (e.g. 8080 or "
         "127.0.0.1:8080; docs/http.md), over the same ledger.")] = None,
 ) -> None:
-    """Run the ROS 2 fault manager node (`/fault_manager`) until SIGINT/SIGTERM.
+    """Run the ROS 2 fault manager node (/fault_manager).
 
-    Refuses to start (exit 2) when another fault manager already serves the same names.
-    ROS arguments follow, e.g. `--ros-args -p confirmation_threshold:=-3`.
+    It serves until SIGINT/SIGTERM, and refuses to start (exit 2) when another fault manager
+    already serves the same names. ROS arguments follow, e.g. `--ros-args -p
+    confirmation_threshold:=-3`.
     """
     try:
         from faultledger.ros.serve import serve as run_node
@@ -278,13 +305,15 @@ def serve(
 def bridge(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(
-        help="action-status, node-state, hardware-status or diagnostics.")],
+        metavar="NAME", help="action-status, node-state, hardware-status or diagnostics.")],
     config: Annotated[Path | None, typer.Option(
-        "--config", help="The bridge's YAML settings (see config/<bridge>.yaml).")] = None,
+        "--config", metavar="FILE",
+        help="The bridge's YAML settings (see config/<bridge>.yaml).")] = None,
 ) -> None:
-    """Run one bridge as its own ROS node, reporting to /fault_manager until SIGINT/SIGTERM.
+    """Run one bridge as a ROS node of its own.
 
-    ROS arguments follow, e.g. `--ros-args -r __ns:=/robot1`.
+    It reports to /fault_manager until SIGINT/SIGTERM. ROS arguments follow, e.g.
+    `--ros-args -r __ns:=/robot1`.
     """
     try:
         from faultledger.ros.bridges.runner import run_bridge
@@ -296,27 +325,31 @@ def bridge(
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
 def nodes(
     ctx: typer.Context,
-    topic: Annotated[str, typer.Option(help="NodeState topic to listen on.")] = "/nodemon/state",
+    topic: Annotated[str, typer.Option(
+        metavar="TOPIC", help="NodeState topic to listen on.")] = "/nodemon/state",
     once: Annotated[bool, typer.Option(
         "--once", help="Print one snapshot after --listen-sec and exit.")] = False,
     listen_sec: Annotated[float, typer.Option(
-        "--listen-sec", min=0.0, help="With --once: how long to listen first.")] = 2.0,
+        "--listen-sec", min=0.0, metavar="SEC",
+        help="With --once: how long to listen first.")] = 2.0,
     sort: Annotated[str, typer.Option(
-        "--sort", help="name, state (worst first) or age (longest silent first); "
+        "--sort", metavar="KEY", help="name, state (worst first) or age (longest silent first); "
         "key s cycles it.")] = "name",
     name_filter: Annotated[str, typer.Option(
-        "--filter", help="Only nodes whose name contains this; key f or / sets it.")] = "",
+        "--filter", metavar="TEXT",
+        help="Only nodes whose name contains this; key f or / sets it.")] = "",
     state: Annotated[list[str] | None, typer.Option(
-        "--state", help="Only nodes in this state (LOST, RUNNING, ERROR...); repeatable.")
+        "--state", metavar="STATE",
+        help="Only nodes in this state (LOST, RUNNING, ERROR...); repeatable.")
     ] = None,
     timeout_sec: Annotated[float, typer.Option(
-        "--timeout-sec", min=0.0, help="Silence after which a node shows LOST (the "
+        "--timeout-sec", min=0.0, metavar="SEC", help="Silence after which a node shows LOST (the "
         "node-state bridge's heartbeat_timeout_sec).")] = 5.0,
 ) -> None:
-    """Live view of every node's nodemon heartbeat (state, age, last non-RUNNING state,
-    messages) until q or Ctrl-C.
+    """Live view of every node's nodemon heartbeat.
 
-    ROS arguments follow, e.g. `--ros-args -r __ns:=/robot1`.
+    State, age, last non-RUNNING state and messages, until q or Ctrl-C. ROS arguments follow,
+    e.g. `--ros-args -r __ns:=/robot1`.
     """
     if sort not in ("name", "state", "age"):
         fail(f"--sort must be name, state or age, got {printable(sort)!r}")
@@ -330,11 +363,27 @@ def nodes(
 
 
 @app.command()
-def demo(db: DbOption = None, config: ConfigOption = None) -> None:
-    """A short scripted scenario: PREFAILED -> CONFIRMED -> HEALED -> CLEARED, with history."""
-    from faultledger.cli.demo import run_demo
+def demo(
+    db: Annotated[str | None, typer.Option(
+        "--db", metavar="URL|PATH",
+        help="Add the demo's records to this database instead (never a fault manager's live "
+        "one). Default: a new scratch SQLite file in the temporary directory, kept so you can "
+        "look at it; FAULTLEDGER_DB and the config's database are not used.")] = None,
+    wide: WideOption = False,
+    shifts: ShiftsOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """A scripted fault life cycle on a scratch database.
 
-    run_demo(url_for(db, config), render.console())
+    One fault goes PREFAILED -> CONFIRMED -> HEALED -> CLEARED; the notifications, the log and
+    the status transitions are shown, and the chain verified.
+    """
+    from faultledger.cli.demo import run_demo, scratch_database
+
+    scratch, url = (None, db) if db else scratch_database()
+    setup = prepare(url, config, Role.WRITER, shifts=shifts)
+    out = render.console(wide=wide)
+    run_demo(setup.url, out, setup.calendar, render.fit_width(out, wide), scratch)
 
 
 def _user() -> str:

@@ -24,25 +24,32 @@ from faultledger.service.bootstrap import LedgerConfig, Role, open_ledger, resol
 from faultledger.service.config import Settings, config_path, load_settings
 from faultledger.service.ledger import FaultLedger
 
-__all__ = ["ConfigOption", "DbOption", "JsonOption", "LedgerConfig", "Role", "ShiftsOption",
-           "WideOption", "fail", "opened", "parse_moment", "parse_time", "prepare",
-           "settings_for"]
+__all__ = ["HELP_MARKUP", "ConfigOption", "DbOption", "JsonOption", "LedgerConfig", "Role",
+           "ShiftsOption", "WideOption", "fail", "opened", "parse_moment", "parse_time",
+           "prepare", "settings_for"]
+
+HELP_MARKUP = None
+"""`--help` as click formats it: paragraphs rewrapped to the terminal (docstring line breaks
+do not survive, ``\\b`` keeps a block as written), a flag shows no type, an option its metavar
+(``--db URL|PATH``). Rich panels kept every docstring line break and showed ``<bool>`` for
+every flag (docs/cli.md, "Help")."""
 
 DbOption = Annotated[
     str | None,
-    typer.Option("--db", envvar="FAULTLEDGER_DB", show_envvar=True,
+    typer.Option("--db", envvar="FAULTLEDGER_DB", show_envvar=True, metavar="URL|PATH",
                  help="Database URL or a plain SQLite file path (default: the config's, else "
                  "sqlite:///var/faultledger.db)."),
 ]
 ConfigOption = Annotated[
     Path | None,
-    typer.Option("--config", envvar="FAULTLEDGER_CONFIG", show_envvar=True,
+    typer.Option("--config", envvar="FAULTLEDGER_CONFIG", show_envvar=True, metavar="FILE",
                  help="YAML configuration file (default: config/faultledger.yaml when it "
                  "exists in the working directory, else the built-in defaults)."),
 ]
 ShiftsOption = Annotated[
     Path | None,
-    typer.Option("--shifts", help="Shift calendar YAML (see config/shifts.yaml): shift ids and "
+    typer.Option("--shifts", metavar="FILE",
+                 help="Shift calendar YAML (see config/shifts.yaml): shift ids and "
                  "the zone of naive times. Default: the config's `shifts`, else UTC "
                  "morning/afternoon/night from 06:00."),
 ]

@@ -1,14 +1,25 @@
-"""Turning faults and log records into terminal tables, JSON and CSV."""
+"""Turning faults and log records into terminal tables, JSON and CSV.
+
+Tables fit the terminal (docs/cli.md, "Tables"): each column has a rank; the columns that do
+not fit are left out, or shown in a shorter form first (``Short`` cells: times without
+milliseconds, long ids shortened with ``…``), highest rank first. Times are shown in the shift
+calendar's zone, named in the column header.
+"""
 
 from __future__ import annotations
 
+import io
+import re
+import sys
+import textwrap
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from datetime import UTC, datetime
-from typing import Any, Literal
+from datetime import datetime
+from typing import IO, Any, Literal, NamedTuple, TextIO, cast
+from zoneinfo import ZoneInfo
 
 from rich.cells import cell_len
-from rich.console import Console
+from rich.console import Console, Group, RenderableType
 from rich.table import Table
 from rich.text import Text
 
@@ -18,6 +29,7 @@ from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.integrity import canonical_json
 from faultledger.domain.projector import Transition
+from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.types import FaultStatus, severity_name
 from faultledger.store.database import describe
 
@@ -30,17 +42,78 @@ _STATUS_STYLE = {
 }
 
 
+# -- times ---------------------------------------------------------------------------------------
 def when(moment: datetime | None) -> str:
+    """ISO 8601 with its offset, for JSON (machine formats keep the stored instant)."""
     return "-" if moment is None else moment.isoformat(timespec="milliseconds")
 
 
-def short(moment: datetime | None) -> str:
-    """Compact UTC time for table cells (the column header says UTC)."""
+def stamp(moment: datetime | None, zone: ZoneInfo, *, ms: bool = True,
+          seconds: bool = True) -> str:
+    """A time for a person, in ``zone`` (the calendar's; the header or text names it):
+    ``2026-11-21 22:10:00.250``. A wall-clock time that happens twice (the hour repeated when
+    daylight saving time ends) carries its abbreviation: ``2026-10-25 02:30:00 CEST``."""
     if moment is None:
         return "-"
-    return moment.astimezone(UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
+    local = moment.astimezone(zone)
+    text = local.strftime("%Y-%m-%d %H:%M:%S" if seconds else "%Y-%m-%d %H:%M")
+    if ms and seconds:
+        text += f".{local.microsecond // 1000:03d}"
+    return text + (f" {local:%Z}" if ambiguous(local) else "")
 
 
+def clock(moment: datetime, zone: ZoneInfo) -> str:
+    """Only the local clock time, ``22:10:00`` (the date is known from the context)."""
+    local = moment.astimezone(zone)
+    return f"{local:%H:%M:%S}" + (f" {local:%Z}" if ambiguous(local) else "")
+
+
+def ambiguous(local: datetime) -> bool:
+    """Whether this local wall-clock time occurs twice in its zone (the fall-back hour)."""
+    return local.replace(fold=1 - local.fold).utcoffset() != local.utcoffset()
+
+
+def zoned(moment: datetime | None, calendar: ShiftCalendar, *, ms: bool = False) -> str:
+    """A time in running text, followed by its zone: ``2026-11-21 22:00:00 Europe/Berlin``."""
+    return "-" if moment is None else f"{stamp(moment, calendar.zone, ms=ms)} {calendar.timezone}"
+
+
+ROOMY = 120
+"""From this width on (and with ``--wide``) a time column's header takes one line."""
+
+
+def time_header(label: str, calendar: ShiftCalendar, cells: int = 19,
+                room: int | None = None) -> str:
+    """``occurred (Europe/Berlin)``: on two lines when the zone's name would widen a column
+    of ``cells`` in a table that has to fit in ``room`` (less than 120 columns)."""
+    one_line = f"{label} ({calendar.timezone})"
+    if cell_len(one_line) <= cells or room is None or room >= ROOMY:
+        return one_line
+    return f"{label}\n({calendar.timezone})"
+
+
+# -- ids -----------------------------------------------------------------------------------------
+ID_WIDTH = 24
+"""Codes, sources and actions longer than this are shortened in narrow tables (``--wide``
+shows them whole)."""
+
+
+def shorten(text: str, width: int = ID_WIDTH) -> str:
+    """``HW_LEFT_ARM…ERGENCY_STOP``: the start and the end of a long id, which tell ids apart
+    better than the start alone."""
+    if cell_len(text) <= width:
+        return text
+    keep = width - 1
+    head = keep // 2
+    return text[:head] + "…" + text[len(text) - (keep - head):]
+
+
+def short_goal(goal_id: str) -> str:
+    """A goal UUID as its first 8 hex digits (``3f2a9c1e…``), as git shortens hashes."""
+    return goal_id if len(goal_id) <= 12 else goal_id[:8] + "…"
+
+
+# -- JSON ----------------------------------------------------------------------------------------
 def fault_dict(fault: Fault) -> dict[str, Any]:
     return {
         "fault_code": fault.fault_code,
@@ -56,15 +129,16 @@ def fault_dict(fault: Fault) -> dict[str, Any]:
     }
 
 
-
-
+# -- fitting tables ------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class Column:
-    """A table column that may be left out when the terminal is too narrow.
+    """A table column that may be left out, or shown shorter, when the terminal is narrow.
 
     ``drop``: 0 = always shown; otherwise the column with the highest ``drop`` is left out
-    first. ``no_wrap`` cells (codes, statuses, ids) are never split; the others fold, at
-    spaces first, down to ``cap`` characters.
+    first. ``squeeze``: the rank at which the column's ``Short`` cells switch to their short
+    form (and the header to ``short_header``); drops and squeezes run in one order, highest
+    rank first, until the table fits. ``no_wrap`` cells (codes, statuses, ids, times) are never
+    split; the others fold, at spaces first, down to ``cap`` characters.
     """
 
     header: str
@@ -72,9 +146,23 @@ class Column:
     no_wrap: bool = False
     justify: Literal["left", "right", "center"] = "left"
     cap: int = 14
+    squeeze: int = 0
+    short_header: str | None = None
+    least: int = 0
+    """The narrowest a folding column may get (details worth reading on few lines)."""
 
 
 Cell = Text | str
+
+
+class Short(NamedTuple):
+    """A cell with a shorter form for narrow terminals (see ``Column.squeeze``)."""
+
+    full: Cell
+    short: Cell
+
+
+Entry = Cell | Short
 _BORDERS = 1
 """Characters of a table's outer border on one side; each column adds padding and a rule."""
 
@@ -83,13 +171,21 @@ def _plain(value: Cell) -> str:
     return value.plain if isinstance(value, Text) else value
 
 
-def _floor(column: Column, cells: Iterable[Cell]) -> int:
+def _form(value: Entry, squeezed: bool) -> Cell:
+    if isinstance(value, Short):
+        return value.short if squeezed else value.full
+    return value
+
+
+def _floor(column: Column, header: str, cells: Iterable[Cell]) -> int:
     """The narrowest this column can be without splitting what must not be split."""
-    texts = [column.header, *(_plain(c) for c in cells)]
+    texts = [header, *(_plain(c) for c in cells)]
     if column.no_wrap:
         return max(cell_len(line) for t in texts for line in t.splitlines() or [""])
-    words = [cell_len(w) for t in texts for w in t.split()] or [1]
-    return min(max(words), column.cap)
+    heads = [cell_len(line) for line in header.splitlines()] or [0]
+    words = [cell_len(w) for t in texts[1:] for w in t.split()] or [1]
+    longest = max(cell_len(t) for t in texts[1:]) if texts[1:] else 0
+    return max(min(max(words), column.cap), min(column.least, longest), *heads)
 
 
 def table_width(widths: Iterable[int]) -> int:
@@ -98,44 +194,121 @@ def table_width(widths: Iterable[int]) -> int:
     return sum(items) + 3 * len(items) + _BORDERS
 
 
-def fitted(title: Cell, columns: Sequence[Column], rows: Sequence[Sequence[Cell]],
-           width: int | None) -> Table:
-    """A table of the columns that fit in ``width`` (None: every column, ``--wide``),
-    leaving out the droppable ones, highest ``drop`` first, until it fits."""
-    floors = [_floor(c, (row[i] for row in rows)) for i, c in enumerate(columns)]
+@dataclass(frozen=True, slots=True)
+class Plan:
+    keep: list[int]
+    squeezed: set[int]
+    fits: bool
+
+
+def plan(columns: Sequence[Column], rows: Sequence[Sequence[Entry]],
+         width: int | None) -> Plan:
+    """Which columns to show and which in their short form so the table fits ``width``."""
     keep = list(range(len(columns)))
-    if width is not None:
-        order = sorted((i for i, c in enumerate(columns) if c.drop),
-                       key=lambda i: -columns[i].drop)
-        for index in order:
-            if table_width(floors[i] for i in keep) <= width:
-                break
+    squeezed: set[int] = set()
+
+    def needed() -> int:
+        return table_width(
+            _floor(columns[i], _header(columns[i], i in squeezed),
+                   (_form(row[i], i in squeezed) for row in rows)) for i in keep)
+
+    if width is None:
+        return Plan(keep, squeezed, True)
+    steps = sorted([(c.drop, 0, i) for i, c in enumerate(columns) if c.drop]
+                   + [(c.squeeze, 1, i) for i, c in enumerate(columns) if c.squeeze],
+                   key=lambda step: (-step[0], -step[1]))
+    for _, squeeze, index in steps:
+        if needed() <= width:
+            break
+        if index not in keep:
+            continue
+        if squeeze:
+            squeezed.add(index)
+        else:
             keep.remove(index)
-    table = Table(title=title, title_justify="left")
-    for i in keep:
+    return Plan(keep, squeezed, needed() <= width)
+
+
+def _header(column: Column, squeezed: bool) -> str:
+    return column.short_header if squeezed and column.short_header else column.header
+
+
+def fitted(title: Cell, columns: Sequence[Column], rows: Sequence[Sequence[Entry]],
+           width: int | None) -> RenderableType:
+    """A table of the columns that fit in ``width`` (None: every column in full, ``--wide``),
+    leaving out or shortening columns, highest rank first, until it fits."""
+    return build(title, columns, rows, plan(columns, rows, width), width)
+
+
+def fitted_first(title: Cell,
+                 layouts: Sequence[tuple[Sequence[Column], Sequence[Sequence[Entry]]]],
+                 width: int | None) -> RenderableType:
+    """The first layout that fits ``width`` (after its own squeezes and drops); else the last
+    one, fitted as well as it can be."""
+    for columns, rows in layouts[:-1]:
+        chosen = plan(columns, rows, width)
+        if chosen.fits:
+            return build(title, columns, rows, chosen, width)
+    return fitted(title, *layouts[-1], width)
+
+
+def build(title: Cell, columns: Sequence[Column], rows: Sequence[Sequence[Entry]],
+          chosen: Plan, width: int | None = None) -> RenderableType:
+    """The table under its title; the title is wrapped to ``width`` by ``wrap`` (never inside
+    a time), not by rich to the table's width."""
+    heading = Text("\n".join(wrap(_plain(title), width)), style="italic")
+    if isinstance(title, Text) and title.style:
+        heading.stylize(title.style)
+    table = Table(title=None)
+    for i in chosen.keep:
         c = columns[i]
-        table.add_column(c.header, justify=c.justify, no_wrap=c.no_wrap,
+        squeezed = i in chosen.squeezed
+        cells = [_form(row[i], squeezed) for row in rows]
+        header = _header(c, squeezed)
+        table.add_column(header, justify=c.justify, no_wrap=c.no_wrap,
                          overflow="ellipsis" if c.no_wrap else "fold",
-                         min_width=floors[i] if c.no_wrap else None)
+                         min_width=_floor(c, header, cells) if c.no_wrap else None)
     for row in rows:
-        table.add_row(*(row[i] for i in keep))
-    return table
+        table.add_row(*(_form(row[i], i in chosen.squeezed) for i in chosen.keep))
+    return Group(heading, table)
 
 
-def faults_table(faults: Iterable[Fault], title: str, width: int | None = None) -> Table:
+_TIME_SPACE = re.compile(r"(?<=\d{4}-\d{2}-\d{2}) (?=\d{2}:\d{2})")
+"""The space between a date and its time: never a place to break a line."""
+_GLUE = "\x00"
+
+
+def wrap(text: str, width: int | None) -> list[str]:
+    """``text`` in lines of at most ``width`` cells, broken at spaces but never between a
+    date and its time (``2026-11-21 22:00:00`` stays on one line); None: one line."""
+    if width is None or cell_len(text) <= width:
+        return [text]
+    glued = _TIME_SPACE.sub(_GLUE, text)
+    lines = textwrap.wrap(glued, max(width, 20), break_on_hyphens=False) or [""]
+    return [line.replace(_GLUE, " ") for line in lines]
+
+
+# -- the tables ----------------------------------------------------------------------------------
+def faults_table(faults: Iterable[Fault], title: str, calendar: ShiftCalendar,
+                 width: int | None = None) -> RenderableType:
     """Every value from outside (code, sources, description, title) is shown literally:
     ``safe_text.cell``, never markup, never a control character. Columns that do not fit in
-    ``width`` go first: sources, description, counter, count, last occurred, severity."""
+    ``width`` go first: sources, description, counter, count, the milliseconds of last
+    occurred, last occurred, severity."""
+    zone = calendar.zone
     columns = (Column("code", no_wrap=True), Column("status", no_wrap=True),
                Column("severity", drop=1, no_wrap=True),
-               Column("count", drop=3, justify="right"),
-               Column("counter", drop=4, justify="right"),
-               Column("last occurred (UTC)", drop=2, no_wrap=True),
-               Column("sources", drop=6), Column("description", drop=5))
-    rows: list[list[Cell]] = [
+               Column("count", drop=4, justify="right"),
+               Column("counter", drop=5, justify="right"),
+               Column(time_header("last occurred", calendar, 23, width), drop=2,
+                      no_wrap=True, squeeze=3,
+                      short_header=time_header("last occurred", calendar, 19, width)),
+               Column("sources", drop=7), Column("description", drop=6))
+    rows: list[list[Entry]] = [
         [cell(f.fault_code), cell(f.status.value, _STATUS_STYLE[f.status]),
          severity_name(f.severity), str(f.occurrence_count), str(f.debounce_counter),
-         short(f.last_occurred), cell(", ".join(f.reporting_sources)), cell(f.description)]
+         Short(stamp(f.last_occurred, zone), stamp(f.last_occurred, zone, ms=False)),
+         cell(", ".join(f.reporting_sources)), cell(f.description)]
         for f in faults]
     return fitted(cell(title), columns, rows, width)
 
@@ -158,29 +331,85 @@ def summary(record: LogRecord) -> str:
     return str(p.get("reason", ""))
 
 
-def history_table(records: Iterable[LogRecord], width: int | None = None) -> Table:
-    """Columns that do not fit in ``width`` go first: source, kind, occurred."""
-    columns = (Column("seq", no_wrap=True, justify="right"),
-               Column("occurred (UTC)", drop=2, no_wrap=True),
-               Column("kind", drop=3), Column("code", no_wrap=True),
-               Column("source", drop=4), Column("details", drop=1, cap=16))
-    rows: list[list[Cell]] = [
-        [str(r.seq), short(r.occurred_at), cell(r.kind), cell(r.fault_code or ""),
-         cell(r.source_id or ""), cell(summary(r))] for r in records]
-    return fitted("fault log", columns, rows, width)
+def _subject_and_details(record: LogRecord, room: int) -> tuple[str, str]:
+    """What a narrow history row shows in its one ``code / details`` column: the fault code
+    (or a goal's action) and the details; ids longer than ``room`` are shortened."""
+    p = record.payload
+    if record.kind == "goal_outcome":
+        return (shorten(str(p["action"]), room),
+                f"{p['status']} goal {short_goal(str(p['goal_id']))}")
+    if record.kind == "fault_cleared":
+        reason = f": {p['reason']}" if p["reason"] else ""
+        return (shorten(record.fault_code or "", room),
+                f"cleared by {shorten(str(p['actor']), room)}{reason}")
+    return shorten(record.fault_code or "", room), summary(record)
 
 
-def transitions_table(items: Iterable[Transition], width: int | None = None,
-                      reasons: dict[int, str] | None = None) -> Table:
-    """Columns that do not fit in ``width`` go first: cause, at. ``reasons``: the clear
-    reason of a seq, shown after its cause."""
+KIND_WIDTH = 16
+
+
+def _kind_lines(kind: str) -> str:
+    """A record kind on lines of at most 16 characters, broken after an underscore
+    (``fault_confirmed_`` / ``by_timer``); the common kinds fit on one."""
+    if len(kind) <= KIND_WIDTH:
+        return kind
+    cut = kind.rindex("_", 0, KIND_WIDTH) + 1
+    return kind[:cut] + "\n" + _kind_lines(kind[cut:])
+
+
+def history_table(records: Iterable[LogRecord], calendar: ShiftCalendar,
+                  width: int | None = None) -> RenderableType:
+    """The log, one row per record. Wide: seq, occurred, kind, code, source, details (source
+    goes first). Narrow (an 80-column terminal): seq, occurred (without milliseconds), kind and
+    one column with the code (or a goal's action) over the details, long ids shortened."""
+    zone = calendar.zone
+    items = list(records)
+    wide_columns = (Column("seq", no_wrap=True, justify="right"),
+                    Column(time_header("occurred", calendar, 23, width), no_wrap=True),
+                    Column("kind", no_wrap=True), Column("code", no_wrap=True),
+                    Column("source", drop=1), Column("details", cap=16, least=36))
+    wide_rows: list[list[Entry]] = [
+        [str(r.seq), stamp(r.occurred_at, zone), cell(r.kind), cell(r.fault_code or ""),
+         cell(r.source_id or ""), cell(summary(r))] for r in items]
+    narrow_columns = (Column("seq", no_wrap=True, justify="right"),
+                      Column(time_header("occurred", calendar, 19, width), drop=1,
+                             no_wrap=True),
+                      Column("kind", drop=2, no_wrap=True),
+                      Column("code / details", cap=ID_WIDTH))
+    fixed = [[str(r.seq), stamp(r.occurred_at, zone, ms=False), _kind_lines(r.kind)]
+             for r in items]
+    room = ID_WIDTH
+    if width is not None:  # the codes get what the other columns leave, at least 24
+        floors = [_floor(c, c.header, (row[i] for row in fixed))
+                  for i, c in enumerate(narrow_columns[:3])]
+        room = max(ID_WIDTH, width - table_width([*floors, 0]))
+    narrow_columns = (*narrow_columns[:3], Column("code / details", cap=room))
+    narrow_rows: list[list[Entry]] = []
+    for r, (seq, occurred, kind) in zip(items, fixed, strict=True):
+        subject, details = _subject_and_details(r, room)
+        text = Text(printable(subject), style="bold") if subject else Text()
+        if subject and details:
+            text.append("\n")
+        text.append(printable(details))
+        narrow_rows.append([seq, occurred, cell(kind), text])
+    return fitted_first("fault log", [(wide_columns, wide_rows),
+                                      (narrow_columns, narrow_rows)], width)
+
+
+def transitions_table(items: Iterable[Transition], calendar: ShiftCalendar,
+                      width: int | None = None, reasons: dict[int, str] | None = None
+                      ) -> RenderableType:
+    """Columns that do not fit in ``width`` go first: cause, the milliseconds of at, at, by.
+    ``reasons``: the clear reason of a seq, shown after its cause."""
     why = reasons or {}
+    zone = calendar.zone
     columns = (Column("seq", no_wrap=True, justify="right"),
-               Column("at (UTC)", drop=2, no_wrap=True),
+               Column(time_header("at", calendar, 23, width), drop=2, no_wrap=True, squeeze=3),
                Column("from", no_wrap=True), Column("to", no_wrap=True),
-               Column("cause", drop=3), Column("by", drop=1))
-    rows: list[list[Cell]] = [
-        [str(t.seq), short(from_ns(t.at_ns)),
+               Column("cause", drop=4), Column("by", drop=1))
+    rows: list[list[Entry]] = [
+        [str(t.seq), Short(stamp(from_ns(t.at_ns), zone), stamp(from_ns(t.at_ns), zone,
+                                                                ms=False)),
          t.from_status.value if t.from_status else "(new)", t.to_status.value,
          cell(f"{t.cause}: {why[t.seq]}" if why.get(t.seq) else t.cause), cell(t.source_id)]
         for t in items]
@@ -191,6 +420,22 @@ def describe_url(url: str) -> str:
     return describe(url)
 
 
+# -- output --------------------------------------------------------------------------------------
+def note(message: str) -> None:
+    """``note: …`` on stderr: on a terminal wrapped at spaces (never inside a time), indented
+    under its first line; piped, one line (scripts grep it whole)."""
+    err = Console(stderr=True, highlight=False, soft_wrap=True)
+    if not err.is_terminal:
+        complain("note:", message)
+        return
+    lines = wrap("note: " + printable(message), err.width)
+    first, rest = lines[0], lines[1:]
+    label, _, head = first.partition(" ")
+    err.print(Text.assemble((label, "bold yellow"), " ", head))
+    for line in wrap(" ".join(rest), err.width - 6) if rest else []:
+        err.print(Text("      " + line))
+
+
 def complain(label: str, message: str) -> None:
     """One line on stderr: the label in red, the operator's text verbatim (never as markup,
     never wrapped, so brackets survive and the line stays greppable; control characters it
@@ -199,14 +444,58 @@ def complain(label: str, message: str) -> None:
         Text.assemble((printable(label), "bold red"), " ", printable(message)))
 
 
+PIPE_WIDTH = 200
+"""Tables written to a pipe or file are laid out for this many columns; their lines carry no
+padding."""
+WIDE = 1000
+"""The console width of ``--wide``: no table is cut to fit."""
+
+
+class _Unpadded(io.TextIOBase):
+    """A text stream that drops the spaces rich pads lines with (a title padded to the
+    console's width, a table's blank cells at the end of a line)."""
+
+    def __init__(self, target: TextIO) -> None:
+        super().__init__()
+        self._target = target
+        self._pending = ""
+
+    def write(self, text: str) -> int:
+        lines = (self._pending + text).split("\n")
+        self._pending = lines.pop()
+        for line in lines:
+            self._target.write(line.rstrip(" ") + "\n")
+        return len(text)
+
+    def flush(self) -> None:
+        if self._pending:  # a line not ended yet: written as it is (rich ends its lines)
+            self._target.write(self._pending)
+            self._pending = ""
+        self._target.flush()
+
+    def isatty(self) -> bool:
+        return self._target.isatty()
+
+    def fileno(self) -> int:
+        return self._target.fileno()
+
+    @property
+    def encoding(self) -> str:  # type: ignore[override]
+        return getattr(self._target, "encoding", "utf-8")
+
+
 def console(stderr: bool = False, *, wide: bool = False) -> Console:
-    """Rich console; when piped (no terminal) tables get 200 columns instead of wrapping at 80.
-    ``wide``: as wide as the widest table (``--wide``: every column, the terminal wraps)."""
-    probe = Console(stderr=stderr)
-    width = None if probe.is_terminal else 200
+    """Rich console for tables. A terminal: its width. A pipe or file: 200 columns, whatever
+    COLUMNS says (a Python parent process that loaded readline exports its own terminal's
+    width there), and no line is padded with trailing spaces. ``wide`` (``--wide``): as wide
+    as the widest table, every column (the terminal wraps what is wider)."""
+    target = sys.stderr if stderr else sys.stdout
+    probe = Console(file=target)
+    width = None if probe.is_terminal else PIPE_WIDTH
     if wide:
         width = max(probe.width, WIDE)
-    return Console(stderr=stderr, highlight=False, soft_wrap=False, width=width)
+    return Console(file=cast(IO[str], _Unpadded(target)), highlight=False, soft_wrap=False,
+                   width=width)
 
 
 def say(text: str) -> None:
@@ -215,12 +504,9 @@ def say(text: str) -> None:
     out = console()
     if out.is_terminal:
         out.print(cell(text))
+        out.file.flush()
     else:
         print(printable(text), flush=True)
-
-
-WIDE = 1000
-"""The console width of ``--wide``: no table is cut to fit."""
 
 
 def fit_width(out: Console, wide: bool) -> int | None:

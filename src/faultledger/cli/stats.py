@@ -9,12 +9,12 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Sequence
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.table import Table
+from rich.console import RenderableType
 
 from faultledger.cli import render
 from faultledger.cli.options import (
@@ -28,7 +28,7 @@ from faultledger.cli.options import (
     parse_time,
     prepare,
 )
-from faultledger.cli.render import Cell, Column, fitted
+from faultledger.cli.render import Column, Entry, Short, fitted
 from faultledger.cli.safe_text import cell, printable
 from faultledger.cli.shift_report import terminal
 from faultledger.domain.periods import PERIOD_KINDS
@@ -40,7 +40,8 @@ from faultledger.service.output_files import OutputFileError, check_target, writ
 
 AsOfOption = Annotated[
     str | None,
-    typer.Option("--as-of", help=f"End CONFIRMED episodes still open at this time (default: "
+    typer.Option("--as-of", metavar="TIME",
+                 help=f"End CONFIRMED episodes still open at this time (default: "
                  f"now): {TIME_HELP}."),
 ]
 
@@ -58,16 +59,19 @@ def _as_of(text: str | None, calendar: ShiftCalendar) -> datetime | None:
 # -- stats ---------------------------------------------------------------------------------------
 def stats(
     by: Annotated[str, typer.Option(
-        "--by", help=f"Period: {', '.join(PERIOD_KINDS)}.")] = "shift",
+        "--by", metavar="PERIOD", help=f"Period: {', '.join(PERIOD_KINDS)}.")] = "shift",
     code: Annotated[list[str] | None, typer.Option(
-        "--code", help="Fault code glob, e.g. 'HW_*_EMERGENCY_STOP' (repeatable).")] = None,
+        "--code", metavar="GLOB",
+        help="Fault code glob, e.g. 'HW_*_EMERGENCY_STOP' (repeatable).")] = None,
     group_by: Annotated[list[str] | None, typer.Option(
-        "--group-by", help=f"Group rows by {', '.join(GROUP_KEYS)} (repeatable; action: "
+        "--group-by", metavar="KEY",
+        help=f"Group rows by {', '.join(GROUP_KEYS)} (repeatable; action: "
         "goal outcomes per action, with source only).")] = None,
     since: Annotated[str | None, typer.Option(
-        "--since", help=f"Start (inclusive): {TIME_HELP}. Default: until - 24 h.")] = None,
+        "--since", metavar="TIME",
+        help=f"Start (inclusive): {TIME_HELP}. Default: 24 hours before --until.")] = None,
     until: Annotated[str | None, typer.Option(
-        "--until", help="End (exclusive): like --since; a shift id means its end. "
+        "--until", metavar="TIME", help="End (exclusive): like --since; a shift id means its end. "
         "Default: --as-of, else now (what happened a second ago is counted).")] = None,
     as_of: AsOfOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="JSON array of every figure.")
@@ -79,9 +83,10 @@ def stats(
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Fault statistics per shift, day, hour or 10 minutes (docs/statistics.md).
+    """Fault statistics per shift, day, hour or 10 minutes.
 
-    Narrow terminals show the first columns only (--wide: all; --json/--csv: every figure).
+    The figures are defined in docs/statistics.md. Narrow terminals show the first columns
+    only (--wide: all; --json/--csv: every figure); times are in the calendar's zone.
     """
     if as_json and as_csv:
         fail("choose one of --json and --csv")
@@ -102,12 +107,50 @@ def stats(
         out.print(stats_table(rows, by, groups, calendar, code, render.fit_width(out, wide)))
 
 
+FIGURES = ("e-stops", "aborted goals", "activations", "failed", "confirmations", "heals",
+           "clears", "active", "MTTR", "flood %", "chattering", "stale")
+"""The figures of the table in the order of the shift report's key figures (e-stops and
+aborted goals first); --json/--csv carry every figure."""
+GOAL_FIGURES = ("aborted goals", "canceled goals", "succeeded goals")
+"""Rows grouped by action hold goal figures only."""
+
+
+def _figures(row: StatsRow) -> dict[str, str]:
+    return {"e-stops": str(row.estops), "aborted goals": str(row.aborted_goals),
+            "activations": str(row.activations), "failed": str(row.failed_reports),
+            "confirmations": str(row.confirmations), "heals": str(row.heals),
+            "clears": str(row.clears), "active": duration(row.active_seconds),
+            "MTTR": duration(row.mttr_seconds), "flood %": f"{row.flood_percent:.1f}",
+            "chattering": str(row.chattering_codes), "stale": str(row.stale_codes),
+            "canceled goals": str(row.canceled_goals),
+            "succeeded goals": str(row.succeeded_goals)}
+
+
+def local_span(row: StatsRow, calendar: ShiftCalendar) -> Short:
+    """The period in the calendar's zone: ``2026-11-21 22:00–2026-11-22 06:00``; shorter,
+    ``22:00–06:00``, when the period id already says the day (not for `unscheduled`)."""
+    zone = calendar.zone
+    start, end = row.period.start.astimezone(zone), row.period.end.astimezone(zone)
+    marks = [render.ambiguous(start), render.ambiguous(end)]
+    first = f"{start:%H:%M}" + (f" {start:%Z}" if marks[0] else "")
+    last = f"{end:%H:%M}" + (f" {end:%Z}" if marks[1] else "")
+    full = (f"{start:%Y-%m-%d} {first}–{last}" if end.date() == start.date()
+            else f"{start:%Y-%m-%d} {first}–{end:%Y-%m-%d} {last}")
+    if row.period.production_day is None:  # unscheduled: only the span says when
+        return Short(full, full)
+    if last == "00:00" and end.date() == start.date() + timedelta(days=1):
+        last = "24:00"  # a day, or a shift ending at midnight: 00:00–24:00, 14:00–24:00
+    return Short(full, f"{first}–{last}")
+
+
 def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
                 calendar: ShiftCalendar, codes: Sequence[str] | None,
-                width: int | None = None) -> Table:
+                width: int | None = None) -> RenderableType:
     """The figures people read first; --json/--csv have all of them. Rows grouped by action
     hold goal figures only (docs/statistics.md): they show the three goal counts. Columns that
-    do not fit in ``width`` go from the right (the least read first)."""
+    do not fit in ``width`` go from the right (the least read first), then the local time
+    (shortened first); the period, the group keys, e-stops, aborted goals, activations and
+    failed stay, as long as they fit."""
     zone = calendar.zone
     title = f"statistics by {by}"
     if rows:
@@ -117,31 +160,28 @@ def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
     if codes:
         title += f", codes {' '.join(codes)}"
     goals_only = "action" in group_by
-    figures = (("aborted goals", "canceled goals", "succeeded goals") if goals_only else
-               ("failed", "activations", "aborted goals", "confirmations", "heals", "clears",
-                "active", "MTTR", "flood %", "chattering", "stale"))
-    # Dropped first: the last figure; then the others right to left, the local time before
-    # the first two figures; the period and the group keys stay.
-    ranks = {name: i + 2 for i, name in enumerate(figures)}
-    ranks[figures[0]], ranks[figures[1]] = 2, 1
-    columns = [Column("period", no_wrap=True), Column("local time", drop=3, cap=16),
-               *(Column(key, no_wrap=True) for key in group_by),
+    # Rows grouped by fault keys only (code, source, severity) have no goal figures.
+    figures = (GOAL_FIGURES if goals_only else FIGURES if not group_by
+               else tuple(name for name in FIGURES if name != "aborted goals"))
+    # Dropped first: the last figure, then the others right to left; then the local time
+    # (shortened first), then long ids of the groups are shortened; the first four figures go
+    # last, right to left (e-stops and aborted goals stay longest).
+    ranks = {name: 20 + len(figures) - i for i, name in enumerate(figures)}
+    for i, name in enumerate(figures[:4]):
+        ranks[name] = i + 1
+    columns = [Column("period", no_wrap=True),
+               Column(f"local time ({calendar.timezone})", drop=8, no_wrap=True, squeeze=9,
+                      short_header=calendar.timezone),
+               *(Column(key, no_wrap=True, squeeze=7) for key in group_by),
                *(Column(name, drop=ranks[name], justify="right", no_wrap=True)
                  for name in figures)]
-    table_rows: list[list[Cell]] = []
+    table_rows: list[list[Entry]] = []
     for row in rows:
-        start, end = row.period.start.astimezone(zone), row.period.end.astimezone(zone)
-        span = (f"{start:%Y-%m-%d %H:%M}–{end:%H:%M}" if end.date() == start.date()
-                else f"{start:%Y-%m-%d %H:%M}–{end:%Y-%m-%d %H:%M}")
-        values = ([str(row.aborted_goals), str(row.canceled_goals), str(row.succeeded_goals)]
-                  if goals_only else
-                  [str(row.failed_reports), str(row.activations), str(row.aborted_goals),
-                   str(row.confirmations), str(row.heals), str(row.clears),
-                   duration(row.active_seconds), duration(row.mttr_seconds),
-                   f"{row.flood_percent:.1f}", str(row.chattering_codes),
-                   str(row.stale_codes)])
-        table_rows.append([cell(row.period.id), span,
-                           *(cell(group_text(row, key)) for key in group_by), *values])
+        values = _figures(row)
+        groups = [group_text(row, key) for key in group_by]
+        table_rows.append([cell(row.period.id), local_span(row, calendar),
+                           *(Short(cell(text), cell(render.shorten(text))) for text in groups),
+                           *(values[name] for name in figures)])
     if not rows:
         table_rows.append(["(no rows)", *[""] * (len(columns) - 1)])
     return fitted(cell(title), columns, table_rows, width)
@@ -150,12 +190,15 @@ def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
 # -- report-shift --------------------------------------------------------------------------------
 def report_shift(
     shift_id: Annotated[str | None, typer.Argument(
+        metavar="SHIFT",
         help="Shift instance, e.g. 2026-11-21/night. Default: the last completed shift.",
         show_default=False)] = None,
     html_file: Annotated[Path | None, typer.Option(
-        "--html", help="Also write the report as one self-contained HTML file.")] = None,
+        "--html", metavar="FILE",
+        help="Also write the report as one self-contained HTML file.")] = None,
     png_file: Annotated[Path | None, typer.Option(
-        "--png", help="Also write the charts (per hour, top offenders) as a PNG.")] = None,
+        "--png", metavar="FILE",
+        help="Also write the charts (per hour, top offenders) as a PNG.")] = None,
     force: Annotated[bool, typer.Option(
         "--force", help="Replace existing --html/--png files (default: refuse).")] = False,
     as_of: AsOfOption = None,
@@ -166,8 +209,11 @@ def report_shift(
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """End-of-shift summary: key figures against the previous instance of the same shift,
-    top offenders, longest downtimes and activity per hour."""
+    """End-of-shift summary, compared with the shift before.
+
+    Key figures against the previous instance of the same shift, top offenders, longest
+    downtimes and activity per hour, in the calendar's zone.
+    """
     for target in (html_file, png_file):
         if target is not None:
             try:

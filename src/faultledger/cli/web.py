@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 
 from faultledger.cli.options import (
+    HELP_MARKUP,
     ConfigOption,
     DbOption,
     ShiftsOption,
@@ -26,11 +27,12 @@ from faultledger.service.tokens import check_name, check_role, issue, parse_life
 from faultledger.store.database import describe
 
 ListenOption = Annotated[str | None, typer.Option(
-    "--listen", help="[HOST:]PORT to serve on (default: the config's http.listen, "
+    "--listen", metavar="[HOST:]PORT",
+    help="[HOST:]PORT to serve on (default: the config's http.listen, "
     "127.0.0.1:8080). Any address but loopback needs tokens.")]
 
-token_app = typer.Typer(help="Bearer tokens of the HTTP API (only their hashes are stored).",
-                        no_args_is_help=True)
+token_app = typer.Typer(help="Bearer tokens of the HTTP API.\n\nOnly their hashes are stored.",
+                        no_args_is_help=True, rich_markup_mode=HELP_MARKUP)
 
 
 def register(app: typer.Typer) -> None:
@@ -43,7 +45,10 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
          read_only: Annotated[bool, typer.Option(
              "--read-only", help="Serve reads only, beside a fault manager that writes the "
              "same database; reports and clears answer 503.")] = False) -> None:
-    """Serve the HTTP API and the dashboard over a database, without ROS, until Ctrl-C."""
+    """Serve the HTTP API and the dashboard, without ROS.
+
+    Over one database, until Ctrl-C; docs/http.md.
+    """
     from faultledger.http.server import HttpServer
 
     settings = settings_for(config)
