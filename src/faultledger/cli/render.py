@@ -399,19 +399,21 @@ def history_table(records: Iterable[LogRecord], calendar: ShiftCalendar,
 def transitions_table(items: Iterable[Transition], calendar: ShiftCalendar,
                       width: int | None = None, reasons: dict[int, str] | None = None
                       ) -> RenderableType:
-    """Columns that do not fit in ``width`` go first: cause, the milliseconds of at, at, by.
+    """Narrower first: a long ``by`` shortened, cause left out (a clear's reason is also on
+    `show`'s "last cleared" line), at without milliseconds, then at and by left out.
     ``reasons``: the clear reason of a seq, shown after its cause."""
     why = reasons or {}
     zone = calendar.zone
     columns = (Column("seq", no_wrap=True, justify="right"),
-               Column(time_header("at", calendar, 23, width), drop=2, no_wrap=True, squeeze=3),
+               Column(time_header("at", calendar, 23, width), drop=2, no_wrap=True, squeeze=5),
                Column("from", no_wrap=True), Column("to", no_wrap=True),
-               Column("cause", drop=4), Column("by", drop=1))
+               Column("cause", drop=6), Column("by", drop=1, no_wrap=True, squeeze=7))
     rows: list[list[Entry]] = [
         [str(t.seq), Short(stamp(from_ns(t.at_ns), zone), stamp(from_ns(t.at_ns), zone,
                                                                 ms=False)),
          t.from_status.value if t.from_status else "(new)", t.to_status.value,
-         cell(f"{t.cause}: {why[t.seq]}" if why.get(t.seq) else t.cause), cell(t.source_id)]
+         cell(f"{t.cause}: {why[t.seq]}" if why.get(t.seq) else t.cause),
+         Short(cell(t.source_id), cell(shorten(t.source_id)))]
         for t in items]
     return fitted("status transitions", columns, rows, width)
 
