@@ -47,7 +47,7 @@ def dated_steps(now: datetime) -> list[datetime]:
 def run_demo(url: str, out: Console, calendar: ShiftCalendar, width: int | None,
              scratch: Path | None = None) -> None:
     out.print(Text.assemble(("faultledger demo", "bold"), " on ",
-                            printable(render.describe_url(url))))
+                            printable(render.describe_url(url))), soft_wrap=True)
     if scratch is not None:
         out.print(cell("a new scratch database of its own (not var/faultledger.db, nor "
                        "--config's or FAULTLEDGER_DB's); it is kept for the commands at the end, "
