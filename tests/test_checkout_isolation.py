@@ -9,6 +9,7 @@ This runs in a copy of the tree, exactly as a user leaves it, then runs tests of
 from __future__ import annotations
 
 import hashlib
+import os
 import shutil
 import subprocess
 import sys
@@ -37,8 +38,10 @@ def digest(folder: Path) -> dict[str, str]:
 
 
 def run(checkout: Path, *args: str, timeout: float = 120) -> str:
+    """The CLI in the checkout; the demo's scratch database lands beside the checkout."""
+    env = {**os.environ, "TMPDIR": str(checkout.parent)}
     done = subprocess.run([*CLI, *args], cwd=checkout, capture_output=True, text=True,
-                          timeout=timeout, check=False, stdin=subprocess.DEVNULL)
+                          timeout=timeout, check=False, stdin=subprocess.DEVNULL, env=env)
     assert done.returncode == 0, f"{args}: {done.stdout}{done.stderr}"
     return done.stdout
 

@@ -392,7 +392,7 @@ def _hostile_context(value: str) -> dict[str, Any]:
              "rows": [[{"text": value, "cls": value}, {"text": value, "cls": ""}]]}
     return {"shift_id": value, "span_text": value, "length_text": value, "previous_id": value,
             "in_progress_until": value, "notes": [value], "dst_change": True, "top": value,
-            "timezone": value,
+            "timezone": value, "shift_name": value, "estop_codes": value,
             "as_of": value, "figures": table, "offenders": table, "downtimes": table,
             "hours": table, "offenders_png": value, "hours_png": value, "headline": value,
             "glossary": [{"term": value, "meaning": value}]}
