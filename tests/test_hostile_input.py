@@ -43,9 +43,10 @@ BAD_REPORTS: list[tuple[ReportRequest, str]] = [
     (ReportRequest("A", "FAILED", 1, "", "/x", at=datetime(2026, 1, 1)),  # naive
      "timezone-aware"),
     (ReportRequest("A", "FAILED", 1, "", "/x", at="2026-01-01"), "must be a timezone-aware"),  # type: ignore[arg-type]
-    (ReportRequest("A", "PASSED", math.nan, "", "/x"), "severity must be a whole number"),  # type: ignore[arg-type]
-    (ReportRequest("A", "PASSED", math.inf, "", "/x"), "severity must be a whole number"),  # type: ignore[arg-type]
-    (ReportRequest("A", "PASSED", 2**64, "", "/x"), "severity must be a whole number"),
+    (ReportRequest("A", "PASSED", math.nan, "", "/x"), "severity must be 0 (INFO) to 3"),  # type: ignore[arg-type]
+    (ReportRequest("A", "PASSED", math.inf, "", "/x"), "severity must be 0 (INFO) to 3"),  # type: ignore[arg-type]
+    (ReportRequest("A", "PASSED", 2**64, "", "/x"), "severity must be 0 (INFO) to 3"),
+    (ReportRequest("A", "PASSED", 255, "", "/x"), "severity must be 0 (INFO) to 3"),
     (ReportRequest("A", "FAILED", 1.0, "", "/x"), "severity must be 0 (INFO) to 3"),  # type: ignore[arg-type]
     (ReportRequest("A", "FAILED", 1, "a\x00b", "/x"), "description contains a NUL"),
     (ReportRequest("A", "FAILED", 1, "", "/x\x00y"), "source_id contains a NUL"),
@@ -100,11 +101,14 @@ def test_extreme_times_inside_the_range_are_stored(ledger: FaultLedger) -> None:
     assert ledger.verify().ok
 
 
-def test_severity_on_passed_may_be_any_whole_number(ledger: FaultLedger) -> None:
+def test_severity_on_passed_is_checked_as_on_failed(ledger: FaultLedger) -> None:
     ledger.report("A", "FAILED", 1, "", "/x")
 
-    assert ledger.report("A", "PASSED", -(2**63), "", "/x").accepted
-    assert ledger.report("A", "PASSED", 2**63 - 1, "", "/x").accepted
+    for severity in (-(2**63), -1, 4, 255, 2**63 - 1):
+        result = ledger.report("A", "PASSED", severity, "", "/x")
+        assert not result.accepted
+        assert result.message == f"severity must be 0 (INFO) to 3 (CRITICAL), got {severity}"
+    assert ledger.report("A", "PASSED", 3, "", "/x").accepted
 
 
 def test_clear_refuses_an_out_of_range_time_and_a_nul(ledger: FaultLedger) -> None:

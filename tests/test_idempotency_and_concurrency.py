@@ -8,7 +8,7 @@ import uuid
 from collections.abc import Callable
 from pathlib import Path
 
-from faultledger import FaultLedger, Notification, Policy, ReportResult
+from faultledger import FaultLedger, Notification, Policy, ReportRequest, ReportResult
 
 THREADS = 8
 PER_THREAD = 200
@@ -56,6 +56,30 @@ def test_same_event_id_twice_is_stored_once(tmp_path: Path) -> None:
         assert second.event_id == event_id
         assert ledger.last_seq == length
         assert stored_ids(ledger, event_id) == [first.seq]
+
+
+def spellings(event_id: uuid.UUID) -> list[str]:
+    """What ``uuid.UUID`` reads as this id: upper case, braces, URN, no hyphens."""
+    text = str(event_id)
+    return [text.upper(), "{" + text + "}", f"urn:uuid:{text}", event_id.hex]
+
+
+def test_every_spelling_of_an_event_id_is_one_report(tmp_path: Path) -> None:
+    """Issue 18: the id is stored in its canonical form (lowercase, hyphenated) and compared
+    in it, one by one and within one batch alike."""
+    alone, batched = uuid.uuid4(), uuid.uuid4()
+    with FaultLedger.open(url(tmp_path)) as ledger:
+        one_by_one = [ledger.report("SPELLED", "FAILED", 1, "", "/x", event_id=spelling)
+                      for spelling in spellings(alone)]
+        in_a_batch = ledger.report_many([ReportRequest("SPELLED", "FAILED", 1, "", "/x",
+                                                       event_id=spelling)
+                                         for spelling in spellings(batched)])
+        for results, event_id in ((one_by_one, alone), (in_a_batch, batched)):
+            assert [r.accepted for r in results] == [True] * 4
+            assert [r.duplicate for r in results] == [False, True, True, True]
+            assert {r.event_id for r in results} == {str(event_id)}
+            assert len(stored_ids(ledger, str(event_id))) == 1
+        assert len(ledger.history(kinds=["fault_reported"])) == 2
 
 
 def test_duplicate_report_does_not_change_the_fault(tmp_path: Path) -> None:

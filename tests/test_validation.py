@@ -210,10 +210,25 @@ def test_accepted_report_is_stored_under_its_seq(ledger: FaultLedger) -> None:
     assert (stored.kind, stored.fault_code) == ("fault_reported", CODE)
 
 
-@pytest.mark.parametrize("severity", [4, -1, 99])
-def test_severity_not_checked_on_passed(ledger: FaultLedger, severity: int) -> None:
-    result = report(ledger, event_type="PASSED", severity=severity)
-    assert result.accepted is True, result.message
+@pytest.mark.parametrize("severity", [4, -1, 99, 255])
+def test_severity_is_checked_on_passed_as_on_failed(ledger: FaultLedger, severity: int) -> None:
+    """medkit checks the severity on FAILED only; faultledger on PASSED too, with the same
+    message (issue 18)."""
+    log_length = len(ledger.history())
+
+    passed = report(ledger, event_type="PASSED", severity=severity)
+    failed = report(ledger, event_type="FAILED", severity=severity)
+
+    assert passed.accepted is False and passed.reason == "invalid"
+    assert passed.message == failed.message == (
+        f"severity must be 0 (INFO) to 3 (CRITICAL), got {severity}")
+    assert len(ledger.history()) == log_length
+
+
+@pytest.mark.parametrize("severity", [0, 3])
+def test_severity_on_passed_within_the_scale_is_accepted(ledger: FaultLedger,
+                                                          severity: int) -> None:
+    assert report(ledger, event_type="PASSED", severity=severity).accepted
 
 
 # --------------------------------------------------------------------------------------------

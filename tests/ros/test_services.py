@@ -166,6 +166,8 @@ class TestOneSharedManager:
         pytest.param("SVC_BAD_TYPE_255", 255, 1, "/svc_bad", "", id="event-type-255"),
         pytest.param("SVC_BAD_SEVERITY", FAILED, 4, "/svc_bad", "", id="severity-4"),
         pytest.param("SVC_BAD_SEVERITY_255", FAILED, 255, "/svc_bad", "", id="severity-255"),
+        pytest.param("SVC_BAD_PASSED_SEVERITY", PASSED, 4, "/svc_bad", "", id="passed-severity-4"),
+        pytest.param("SVC_BAD_PASSED_255", PASSED, 255, "/svc_bad", "", id="passed-severity-255"),
         pytest.param("SVC_BAD_SOURCE", FAILED, 1, "", "", id="empty-source"),
         pytest.param("SVC_BAD_DESCRIPTION", FAILED, 1, "/svc_bad",
                      "x" * (MAX_DESCRIPTION_LENGTH + 1), id="description-too-long"),
@@ -192,8 +194,8 @@ class TestOneSharedManager:
             assert served.fault(code).severity == 3
         assert served.report("SVC_EDGE_DESC", FAILED, 1, "d" * MAX_DESCRIPTION_LENGTH, "/svc_edge")
         assert len(served.fault("SVC_EDGE_DESC").description) == MAX_DESCRIPTION_LENGTH
-        # Severity is not checked on PASSED.
-        assert served.report("SVC_EDGE.9", PASSED, 200, "", "/svc_edge")
+        # Severity 0..3 on PASSED too (medkit does not check it there; faultledger does).
+        assert served.report("SVC_EDGE.9", PASSED, 3, "", "/svc_edge")
         assert stamp_ns(served.fault("SVC_EDGE.9").last_passed) > 0
 
     @pytest.mark.parametrize(("fault_code", "message"), INVALID_CODES)

@@ -79,17 +79,13 @@ def text_error(name: str, value: str, limit: int) -> str | None:
     return None
 
 
-def severity_error(kind: EventType, severity: object) -> str | None:
-    """0..3 on FAILED; on PASSED medkit does not check it, but it is stored, so it must be a
-    whole number a database column can hold (not NaN, a float or a string)."""
-    whole = isinstance(severity, int) and not isinstance(severity, bool)
-    if kind is EventType.FAILED:
-        if whole and 0 <= severity <= 3:  # type: ignore[operator]
-            return None
-        return f"severity must be 0 (INFO) to 3 (CRITICAL), got {shown(severity)}"
-    if whole and MIN_INTEGER <= severity <= MAX_INTEGER:  # type: ignore[operator]
+def severity_error(severity: object) -> str | None:
+    """0..3 on FAILED and on PASSED alike. medkit checks it on FAILED only, but a PASSED's
+    severity is stored too (and counted by the statistics' severity groups), so a value off
+    the scale (255 from a uint8 field) is refused with the same message."""
+    if isinstance(severity, int) and not isinstance(severity, bool) and 0 <= severity <= 3:
         return None
-    return f"severity must be a whole number, got {shown(severity)}"
+    return f"severity must be 0 (INFO) to 3 (CRITICAL), got {shown(severity)}"
 
 
 def time_error(name: str, moment: object) -> str | None:
@@ -131,7 +127,7 @@ def report_error(
     kind = parse_event_type(event_type)
     if kind is None:
         return f"event_type must be FAILED (0) or PASSED (1), got {shown(event_type)}"
-    problem = severity_error(kind, severity)
+    problem = severity_error(severity)
     if problem:
         return problem
     if isinstance(source_id, str) and not source_id:

@@ -484,14 +484,16 @@ class FaultLedger:
         return 1.0 if after <= 0 else min(1.0, max(0.05, after / 10))
 
 
-def _event_id_error(event_id: str) -> str | None:
+def _canonical_event_id(event_id: object) -> str | None:
+    """The one spelling of a UUID the log stores and the idempotency check compares: lowercase
+    and hyphenated. Every spelling ``uuid.UUID`` reads (upper case, ``{…}``, ``urn:uuid:…``,
+    no hyphens) is the same report. None: not a UUID."""
     if not isinstance(event_id, str) or len(event_id) > 64:
-        return f"event_id must be a UUID, got {validation.shown(event_id)}"
+        return None
     try:
-        uuid.UUID(event_id)
+        return str(uuid.UUID(event_id))
     except ValueError:
-        return f"event_id must be a UUID, got {validation.shown(event_id)}"
-    return None
+        return None
 
 
 def _replay(conn: Connection, upto: int | None = None) -> tuple[Projector, list[Transition]]:
@@ -604,8 +606,11 @@ def _report_command(request: ReportRequest) -> Report | ReportResult:
     kind = validation.parse_event_type(request.event_type)
     problem = validation.report_error(request.fault_code, request.event_type, request.severity,
                                       request.description, request.source_id)
+    event_id = None
     if problem is None and request.event_id is not None:
-        problem = _event_id_error(request.event_id)
+        event_id = _canonical_event_id(request.event_id)
+        if event_id is None:
+            problem = f"event_id must be a UUID, got {validation.shown(request.event_id)}"
     if problem is None and request.at is not None:
         problem = validation.time_error("at", request.at)
     if problem is not None or kind is None:
@@ -613,8 +618,7 @@ def _report_command(request: ReportRequest) -> Report | ReportResult:
     occurred_ns = time.time_ns() if request.at is None else to_ns(request.at)
     event = FaultReported(request.fault_code, kind, request.severity, request.description,
                           request.source_id)
-    return Report(event, occurred_ns, request.event_id or str(uuid.uuid4()),
-                  request.event_id is not None)
+    return Report(event, occurred_ns, event_id or str(uuid.uuid4()), event_id is not None)
 
 
 def _goal_command(request: GoalOutcomeRequest) -> RecordGoal | ReportResult:
