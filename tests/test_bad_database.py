@@ -8,6 +8,7 @@ Real SQLite files in tmp_path, the CLI as a real subprocess (``python -m faultle
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import os
 import sqlite3
 import subprocess
@@ -16,6 +17,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -97,6 +99,67 @@ def test_cli_on_random_bytes_prints_one_line_error(not_a_database: Path,
     assert_clean_error(done, "not a faultledger database")
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert not_a_database.read_bytes() == before
+
+
+EMPTY_FILE = "is an empty file (0 bytes), not a faultledger database; to start a new log, " \
+             "delete it or name another path"
+
+
+def test_open_of_an_empty_file_is_refused_and_writes_nothing(tmp_path: Path) -> None:
+    """A 0-byte file (a truncated copy, `touch`) would silently become a new, empty log."""
+    path = tmp_path / "faults.db"
+    path.touch()
+    with pytest.raises(NotADatabaseError) as caught:
+        FaultLedger.open(url(path))
+    assert str(caught.value) == f"{path} {EMPTY_FILE}"
+    assert path.stat().st_size == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["faults.db"]
+
+
+@pytest.mark.parametrize("command", [["report", "MOTOR_OVERHEAT", "FAILED"], ["list"],
+                                     ["db", "current"], ["db", "upgrade"], ["verify"]],
+                         ids=["report", "list", "db-current", "db-upgrade", "verify"])
+def test_cli_on_an_empty_file_exits_2_saying_how_to_start_a_new_log(tmp_path: Path,
+                                                                     command: list[str]) -> None:
+    path = tmp_path / "faults.db"
+    path.touch()
+    done = run_cli(*command, "--db", url(path))
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert_clean_error(done, EMPTY_FILE)
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert path.stat().st_size == 0
+
+
+def _open_after(barrier: Any, url_: str, answers: Any) -> None:
+    barrier.wait()
+    try:
+        FaultLedger.open(url_).close()
+        answers.put("ok")
+    except Exception as error:  # reported to the test, which names it
+        answers.put(f"{type(error).__name__}: {error}")
+
+
+def test_a_new_database_is_never_an_empty_file_another_process_could_see(tmp_path: Path
+                                                                         ) -> None:
+    """faultledger creates a database under a temporary name and links it in place with
+    SQLite's header written, so a process opening the path at that moment never finds the
+    0-byte file the check above refuses (with the file created empty first, 4 to 7 of 8
+    processes released together were refused). Eight writers creating one database at once
+    may still give up "locked" waiting for each other's migration: not this check."""
+    path = tmp_path / "new.db"
+    context = multiprocessing.get_context("fork")
+    barrier, answers = context.Barrier(8), context.Queue()
+    processes = [context.Process(target=_open_after, args=(barrier, url(path), answers))
+                 for _ in range(8)]
+    for process in processes:
+        process.start()
+    found = [answers.get(timeout=60) for _ in processes]
+    for process in processes:
+        process.join(10)
+    assert not [a for a in found if "empty file" in a], found
+    assert "ok" in found, found
+    assert path.stat().st_mode & 0o777 == 0o600
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
 # -- read-only databases -------------------------------------------------------------------------

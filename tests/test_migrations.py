@@ -155,9 +155,17 @@ def test_cli_db_current_reports_head_and_up_to_date(tmp_path: Path) -> None:
     assert "up to date" in done.stdout
 
 
+def sqlite_without_tables(path: Path) -> None:
+    """An SQLite file with its header and no table (a 0-byte file is refused outright:
+    tests/test_bad_database.py)."""
+    with contextlib.closing(sqlite3.connect(path)) as conn:
+        conn.execute("PRAGMA journal_mode = WAL")
+    assert path.stat().st_size > 0
+
+
 def test_cli_db_current_on_an_empty_sqlite_file_says_upgrade_is_needed(tmp_path: Path) -> None:
     path = tmp_path / "faults.db"
-    sqlite3.connect(path).close()
+    sqlite_without_tables(path)
     done = run_cli("db", "current", "--db", url(path))
     assert done.returncode == 0, done.stderr
     assert "(empty)" in done.stdout
@@ -179,7 +187,7 @@ def test_cli_read_command_on_a_missing_file_does_not_create_it(tmp_path: Path,
 
 def test_cli_read_command_on_an_unmigrated_file_asks_for_upgrade(tmp_path: Path) -> None:
     path = tmp_path / "faults.db"
-    sqlite3.connect(path).close()
+    sqlite_without_tables(path)
     done = run_cli("list", "--db", url(path))
     assert done.returncode != 0
     assert "Traceback" not in done.stderr

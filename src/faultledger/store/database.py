@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import os
 import sqlite3
+import stat
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -61,6 +63,7 @@ class Database:
         if self.path is not None:
             if self.path.is_dir():
                 raise NotADatabaseError(f"{self.path} is a directory, not a database file")
+            _refuse_empty(self.path)
             if not create and not self.path.exists():
                 raise StoreError(f"database file {self.path} does not exist")
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -177,24 +180,56 @@ DATABASE_MODE = 0o600
 """A new database file's mode; SQLite gives its -wal, -shm and -journal files the same."""
 
 
+def _refuse_empty(path: Path) -> None:
+    """An existing regular file of 0 bytes is no database: SQLite would quietly start a new
+    log in it (a truncated copy, a file created by mistake), so it is refused like any other
+    file that is not a faultledger database. faultledger never leaves one behind itself
+    (``_create_private`` puts a file in place only once SQLite has written its header)."""
+    try:
+        found = path.stat()
+    except OSError:
+        return  # missing (created below) or unreadable (SQLite says why)
+    if stat.S_ISREG(found.st_mode) and found.st_size == 0:
+        raise NotADatabaseError(
+            f"{path} is an empty file (0 bytes), not a faultledger database; to start a new "
+            "log, delete it or name another path")
+
+
 def _create_private(path: Path) -> None:
-    """Create ``path`` empty with mode 0600 (whatever the umask) before SQLite opens it, so
-    the fault log is never readable by other users. An existing file keeps its mode; a name
-    that exists by the time we look (another process, a symlink) is left to SQLite as is."""
+    """Create ``path`` with mode 0600 (whatever the umask) before SQLite opens it, so the fault
+    log is never readable by other users. The file is made under a temporary name, given
+    SQLite's header (WAL mode, as every connection sets) and then linked to ``path``, which
+    must not exist: another process never sees it empty (``_refuse_empty``). An existing file
+    keeps its mode; a name that exists by the time we look (another process, a symlink) is
+    left to SQLite as is."""
     if path.exists():
         return
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.new")
     flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY | getattr(os, "O_NOFOLLOW", 0)
     try:
-        fd = os.open(path, flags, DATABASE_MODE)
+        fd = os.open(temporary, flags, DATABASE_MODE)
+        try:
+            os.fchmod(fd, DATABASE_MODE)  # exactly 0600: os.open's mode was masked by umask
+        finally:
+            os.close(fd)
+        with contextlib.closing(sqlite3.connect(temporary)) as conn:
+            conn.execute("PRAGMA journal_mode = WAL")
+        try:
+            os.link(temporary, path)
+        except FileExistsError:
+            raise
+        except OSError:  # a file system without hard links: a rename, unless one appeared
+            if not path.exists():
+                os.replace(temporary, path)
     except FileExistsError:
         return
-    except OSError as error:
+    except (OSError, sqlite3.Error) as error:
         raise StoreError(f"cannot create database file {path}: "
-                         f"{error.strerror or error}") from None
-    try:
-        os.fchmod(fd, DATABASE_MODE)  # exactly 0600: os.open's mode was masked by the umask
+                         f"{getattr(error, 'strerror', None) or error}") from None
     finally:
-        os.close(fd)
+        for leftover in ("", "-wal", "-shm"):
+            with contextlib.suppress(OSError):
+                os.unlink(f"{temporary}{leftover}")
 
 
 def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
