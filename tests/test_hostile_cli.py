@@ -134,3 +134,100 @@ def test_a_record_that_cannot_be_read_back_is_one_line_and_fails_verify(tmp_path
         assert "cannot be restored" in done.stderr and "damaged or was edited" in done.stderr
         assert "internal error" not in done.stderr and "Traceback" not in done.stderr
         assert len(done.stderr.strip().splitlines()) == 1
+
+
+# -- issue 18: shift ids outside the log, anchors that are no file, rehashed damage ----------
+
+@pytest.mark.parametrize("shift", ["9999-12-31/night", "0001-01-01/night", "9999-12-31/morning"])
+def test_report_shift_outside_the_log_is_one_line_and_exit_2(db_url: str, shift: str) -> None:
+    done = run_cli("report-shift", shift, "--db", db_url)
+
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert done.stderr.strip() == (f"error: shift {shift} is outside the times the log can "
+                                   "hold (1970-01-01T00:00:00Z .. 2262-04-11T23:47:16Z)")
+
+
+def test_verify_with_dev_zero_as_anchor_or_key_is_exit_2(db_url: str, tmp_path: Path) -> None:
+    """/dev/zero never ends: reading it whole was a MemoryError (exit 70)."""
+    from faultledger.service.anchors import new_key_pair
+
+    *_, public_pem = new_key_pair()
+    public = tmp_path / "anchor.pub"
+    public.write_bytes(public_pem)
+    as_anchor = run_cli("verify", "--db", db_url, "--anchor", "/dev/zero",
+                        "--public-key", str(public))
+    as_key = run_cli("verify", "--db", db_url, "--anchor", "/dev/null",
+                     "--public-key", "/dev/zero")
+
+    assert (as_anchor.returncode, as_key.returncode) == (2, 2), (as_anchor, as_key)
+    assert as_anchor.stderr.strip() == ("error: cannot read anchor /dev/zero: it holds more "
+                                        "than 64 KiB (no anchor file is that large)")
+    assert as_key.stderr.strip() == ("error: cannot read public key /dev/zero: it holds more "
+                                     "than 64 KiB (no public key file is that large)")
+
+
+def rehash(path: Path) -> None:
+    """Recompute every hash and the checkpoint's: an edit a chain check cannot see."""
+    from faultledger.domain.integrity import GENESIS_HASH, record_hash
+
+    with sqlite3.connect(path) as conn:
+        previous = GENESIS_HASH
+        for row in conn.execute("SELECT seq, event_id, kind, fault_code, source_id, payload, "
+                                "occurred_at_ns, recorded_at_ns, schema_version FROM events "
+                                "ORDER BY seq").fetchall():
+            previous = record_hash(previous, *row)
+            conn.execute("UPDATE events SET hash = ? WHERE seq = ?", (previous, row[0]))
+        conn.execute("UPDATE checkpoints SET hash = ?", (previous,))
+
+
+@pytest.mark.parametrize(("payload", "error"), [
+    ('{"x":1}', "KeyError: 'fault_code'"),
+    ("not json", "JSONDecodeError"),
+    ('{"description":"","event_type":"MAYBE","fault_code":"CODE_1","severity":1,'
+     '"source_id":"/x"}', "KeyError: 'MAYBE'"),
+])
+def test_verify_of_a_rehashed_malformed_record_fails_naming_its_seq(tmp_path: Path,
+                                                                   payload: str,
+                                                                   error: str) -> None:
+    """A payload this code cannot read, its hash and every later one recomputed: the chain
+    is intact, the full replay is not (was exit 70, "internal error")."""
+    path = tmp_path / "rehashed.db"
+    with FaultLedger.open(f"sqlite:///{path}", policy=Policy()) as ledger:
+        for i in range(5):
+            ledger.report(f"CODE_{i}", "FAILED", 1, "", "/x")
+    with sqlite3.connect(path) as conn:
+        conn.execute("UPDATE events SET payload = ? WHERE seq = 3", (payload,))
+    rehash(path)
+
+    done = run_cli("verify", "--db", f"sqlite:///{path}")
+    as_json = run_cli("verify", "--json", "--db", f"sqlite:///{path}")
+
+    assert done.returncode == 1, (done.stdout, done.stderr)
+    assert done.stderr.startswith("FAILED: record seq 3 cannot be read back (" + error)
+    assert "its content is damaged or was edited" in done.stderr
+    assert "first bad seq: 3" in done.stdout
+    assert "internal error" not in done.stderr and "Traceback" not in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert as_json.returncode == 1
+    assert '"first_bad_seq": 3' in as_json.stdout
+
+
+def test_a_rehashed_malformed_record_after_the_checkpoint_is_named_when_opening(
+        tmp_path: Path) -> None:
+    path = tmp_path / "tail.db"
+    with FaultLedger.open(f"sqlite:///{path}", policy=Policy()) as ledger:
+        for i in range(5):
+            ledger.report(f"CODE_{i}", "FAILED", 1, "", "/x")
+    with sqlite3.connect(path) as conn:
+        conn.execute("UPDATE events SET payload = '{}' WHERE seq = 5")
+        conn.execute("UPDATE checkpoints SET seq = 2")  # so that opening replays seq 3..6
+    rehash(path)
+
+    verified = run_cli("verify", "--db", f"sqlite:///{path}")
+    listed = run_cli("list", "--db", f"sqlite:///{path}")
+
+    assert (verified.returncode, listed.returncode) == (1, 2), (verified, listed)
+    assert verified.stderr.startswith("verify FAILED: database ")
+    for done in (verified, listed):
+        assert "cannot be restored (record seq 5 cannot be read back (KeyError" in done.stderr
+        assert "internal error" not in done.stderr and "Traceback" not in done.stderr

@@ -120,6 +120,26 @@ def test_previous_instance_of_the_same_shift() -> None:
     assert prev is not None and prev.id == "2026-11-20/night"
 
 
+@pytest.mark.parametrize(("zone", "shift_id"), [
+    *((zone, shift_id) for zone in ("Europe/Berlin", "Pacific/Kiritimati", "Etc/GMT+12")
+      for shift_id in ("9999-12-31/night", "9999-12-31/morning", "0001-01-01/night")),
+    ("Europe/Berlin", "1969-12-31/night"), ("Europe/Berlin", "2262-04-11/night"),
+    ("Etc/GMT-12", "1970-01-01/morning"), ("Etc/GMT+12", "2262-04-11/afternoon")])
+def test_a_shift_outside_the_times_the_log_can_hold_is_refused(zone: str,
+                                                               shift_id: str) -> None:
+    """Issue 18: year 9999's night ended past what a datetime holds (OverflowError); in UTC
+    a shift must lie within 1970 .. 2262-04-11T23:47:16Z, whatever its zone."""
+    with pytest.raises(ValueError, match=f"^shift {shift_id} is outside the times the log can "
+                       r"hold \(1970-01-01T00:00:00Z \.\. 2262-04-11T23:47:16Z\)$"):
+        calendar(zone).parse_id(shift_id)
+
+
+def test_the_first_shift_of_1970_has_no_previous_instance() -> None:
+    cal = calendar("UTC")
+    assert cal.previous(cal.parse_id("1970-01-01/morning")) is None
+    assert cal.previous(cal.parse_id("1970-01-02/morning")) is not None
+
+
 @pytest.mark.parametrize(("data", "message"), [
     ({"timezone": "Mars/Olympus", "shifts": THREE_SHIFTS}, "unknown IANA time zone"),
     ({"timezone": "UTC", "shifts": [{"name": "a", "start": "06:00", "end": "15:00"},

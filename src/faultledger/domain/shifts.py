@@ -17,6 +17,8 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from faultledger.domain.clock import MAX_TIME, MIN_TIME, TIME_RANGE_TEXT
+
 Weekday = Literal["mon", "tue", "wed", "thu", "fri", "sat", "sun"]
 WEEKDAYS: tuple[Weekday, ...] = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
 UNSCHEDULED = "unscheduled"
@@ -168,7 +170,14 @@ class ShiftCalendar(BaseModel):
         day = date.fromisoformat(match.group(1))
         for shift in self.shifts_on(day):
             if shift.name == match.group(2):
-                return self.instance(day, shift)
+                try:
+                    found = self.instance(day, shift)
+                except OverflowError:  # ends after 9999-12-31, or starts before year 1 in UTC
+                    found = None
+                if found is None or found.start < MIN_TIME or found.end > MAX_TIME:
+                    raise ValueError(f"shift {shift_id} is outside the times the log can hold "
+                                     f"({TIME_RANGE_TEXT})")
+                return found
         names = ", ".join(s.name for s in self.shifts_on(day)) or "none"
         raise ValueError(f"no shift {match.group(2)!r} starts on {day} "
                          f"(shifts that day: {names})")
@@ -179,7 +188,8 @@ class ShiftCalendar(BaseModel):
             day = inst.production_day - timedelta(days=back)
             for shift in self.shifts_on(day):
                 if shift.name == inst.name:
-                    return self.instance(day, shift)
+                    found = self.instance(day, shift)
+                    return found if found.start >= MIN_TIME else None  # none before 1970
         return None
 
 

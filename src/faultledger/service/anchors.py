@@ -107,11 +107,21 @@ def load_public_key(path: Path) -> Ed25519PublicKey:
     return key
 
 
+MAX_FILE_BYTES = 64 * 1024
+"""More than any key or anchor file holds (an anchor is about 500 bytes): a larger file, or a
+device such as /dev/zero, is refused after reading this much, never read into memory whole."""
+
+
 def _read(path: Path, what: str) -> bytes:
     try:
-        return path.read_bytes()
+        with path.open("rb") as file:
+            data = file.read(MAX_FILE_BYTES + 1)
     except OSError as error:
         raise AnchorError(f"cannot read {what} {path}: {error.strerror or error}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise AnchorError(f"cannot read {what} {path}: it holds more than "
+                          f"{MAX_FILE_BYTES // 1024} KiB (no {what} file is that large)")
+    return data
 
 
 # -- files ---------------------------------------------------------------------------------------

@@ -128,8 +128,9 @@ class FaultLedger:
             raise
         except Exception as error:  # stored content this code cannot read: damage, not a bug
             db.dispose()
+            detail = str(error) if isinstance(error, UnreadableRecord) else clipped(error)
             raise DamagedDatabaseError(
-                f"database {describe(url)} cannot be restored ({clipped(error)}): its content "
+                f"database {describe(url)} cannot be restored ({detail}): its content "
                 "is damaged or was edited; restore a backup") from error
         except BaseException:
             db.dispose()
@@ -366,7 +367,10 @@ class FaultLedger:
             if not isinstance(when, int):
                 upto = event_log.last_seq_recorded_by(conn, upto)
             projector = Projector()
-            projector.apply_all(event_log.read(conn, upto_seq=upto))
+            try:
+                _apply_all(projector, event_log.read(conn, upto_seq=upto))
+            except UnreadableRecord as error:
+                raise DamagedDatabaseError(f"{error}: {DAMAGED}; restore a backup") from error
         return sorted(projector.committed(), key=lambda f: f.fault_code)
 
     def verify(self, from_seq: int | None = None, to_seq: int | None = None) -> VerifyReport:
@@ -400,7 +404,12 @@ class FaultLedger:
                     first_bad = chain.head_seq
                     problems.append(f"record {chain.head_seq} differs from the recorded head")
             if not problems:
-                problems.extend(_projection_problems(conn, checkpoint))
+                try:
+                    problems.extend(_projection_problems(conn, checkpoint))
+                except UnreadableRecord as error:  # its hash matches: rehashed, or written so
+                    first_bad = error.seq
+                    problems.append(f"{error}: {DAMAGED} (its hash and those after it match: "
+                                    "they were recomputed, or it was written so)")
         return VerifyReport(not problems, chain.records, chain.head_seq, chain.head_hash,
                             first_bad, problems)
 
@@ -496,9 +505,47 @@ def _canonical_event_id(event_id: object) -> str | None:
         return None
 
 
+DAMAGED = "its content is damaged or was edited"
+
+
+class UnreadableRecord(Exception):
+    """A stored record this code cannot decode or apply: a damaged or edited payload (valid
+    records never fail a replay), named by its seq."""
+
+    def __init__(self, seq: int, error: BaseException) -> None:
+        super().__init__(f"record seq {seq} cannot be read back ({clipped(error, 200)})")
+        self.seq = seq
+
+
+def _apply_all(projector: Projector, records: Iterable[LogRecord]) -> list[Transition]:
+    """``projector.apply_all`` over consecutive records; a record that cannot be decoded (in
+    the store's read) or applied raises UnreadableRecord with its seq. Database errors
+    (locked, I/O) pass unchanged."""
+    reading = iter(records)
+
+    def checked() -> Iterator[LogRecord]:
+        while True:
+            try:
+                record = next(reading)
+            except StopIteration:
+                return
+            except FaultLedgerError:
+                raise
+            except Exception as error:  # decoding the next record failed
+                raise UnreadableRecord(projector.seq + 1, error) from error
+            yield record
+
+    try:
+        return projector.apply_all(checked())
+    except (UnreadableRecord, FaultLedgerError):
+        raise
+    except Exception as error:  # applying the record projector.seq failed
+        raise UnreadableRecord(projector.seq, error) from error
+
+
 def _replay(conn: Connection, upto: int | None = None) -> tuple[Projector, list[Transition]]:
     projector = Projector(stats=StatsFold())
-    return projector, projector.apply_all(event_log.read(conn, upto_seq=upto))
+    return projector, _apply_all(projector, event_log.read(conn, upto_seq=upto))
 
 
 def _stats(projector: Projector) -> StatsFold:
@@ -540,7 +587,7 @@ def _persist_tail(db: Database, projector: Projector) -> Projector:
     try:
         with db.writing() as conn:
             projector.stage()
-            found = projector.apply_all(event_log.read(conn, after_seq=projector.seq))
+            found = _apply_all(projector, event_log.read(conn, after_seq=projector.seq))
             projections.save(conn, projector.staged_faults(), found,
                              projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
             stat_tables.save(conn, _stats(projector).take(), projector.seq)
@@ -550,7 +597,7 @@ def _persist_tail(db: Database, projector: Projector) -> Projector:
         log.warning("projections lag the log and cannot be saved (%s); replaying in memory",
                     error)
         with db.reading() as conn:
-            projector.apply_all(event_log.read(conn, after_seq=projector.seq))
+            _apply_all(projector, event_log.read(conn, after_seq=projector.seq))
         _stats(projector).take()
     return projector
 
@@ -560,7 +607,7 @@ def _catch_up_statistics(db: Database, upto: int, stats_seq: int) -> StatsFold:
     them): fold the log up to the projections' seq and write them all."""
     with db.reading() as conn:
         replayed = Projector(stats=StatsFold())
-        replayed.apply_all(event_log.read(conn, upto_seq=upto))
+        _apply_all(replayed, event_log.read(conn, upto_seq=upto))
     fold = _stats(replayed)
     output = fold.take()
     log.info("statistics include seq %d of %d: computing them from the log", stats_seq, upto)
