@@ -11,6 +11,7 @@ from fastapi import APIRouter
 from fastapi.responses import FileResponse, HTMLResponse
 from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
 
+from faultledger.domain.validation import shown
 from faultledger.errors import Reason
 from faultledger.http.context import Context
 from faultledger.http.errors import ApiError
@@ -38,11 +39,17 @@ def router(context: Context) -> APIRouter:
     def dashboard() -> HTMLResponse:
         return HTMLResponse(page, headers={"Cache-Control": "no-cache"})
 
+    # The assets are the files shipped in static/, named once at start: a request's name is
+    # looked up among them, never handed to the file system (a 5,000-character name is a
+    # plain 404, not "File name too long").
+    assets = {path.name: path for path in STATIC.iterdir()
+              if path.is_file() and path.suffix in MEDIA and not path.name.startswith(".")}
+
     @api.get("/static/{name}")
     def asset(name: str) -> FileResponse:
-        path = STATIC / name
-        if "/" in name or name.startswith(".") or path.suffix not in MEDIA or not path.is_file():
-            raise ApiError(Reason.NOT_FOUND, f"no such file: {name[:60]!r}")
+        path = assets.get(name)
+        if path is None:
+            raise ApiError(Reason.NOT_FOUND, f"no such file: {shown(name)}")
         return FileResponse(path, media_type=MEDIA[path.suffix],
                             headers={"Cache-Control": "no-cache"})
 

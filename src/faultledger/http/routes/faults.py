@@ -3,23 +3,35 @@ single-fault route the gateway lacks and a stream that resumes from the log."""
 
 from __future__ import annotations
 
+import asyncio
 import json
+import logging
 import threading
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Header, Path, Query, Request, Response
 from sse_starlette import EventSourceResponse, ServerSentEvent
+from sse_starlette.sse import SendTimeoutError
+from starlette.types import Message, Receive, Scope, Send
 
 from faultledger.domain.fault import Fault
 from faultledger.domain.types import FaultStatus
+from faultledger.domain.validation import MAX_INTEGER, shown
 from faultledger.errors import Reason
 from faultledger.http import medkit
 from faultledger.http.context import Context
 from faultledger.http.errors import ApiError
+from faultledger.http.stream import StreamHub
+from faultledger.service.times import SEQ_NUMBER
 from faultledger.service.tokens import Permission, Principal
+
+log = logging.getLogger(__name__)
 
 KEEPALIVE_SEC = 30
 """A ``:keepalive`` comment after this long without events, as the gateway does."""
+SEND_TIMEOUT_SEC = 30
+"""A stream whose send (events or keep-alive) blocks this long is ended: the client stopped
+reading."""
 ENTITY_TYPES = ("apps", "components", "areas", "functions")
 StatusQuery = Annotated[str | None, Query(
     description="pending, confirmed, cleared (CLEARED+HEALED+PREPASSED), healed "
@@ -49,12 +61,14 @@ def not_found(code: str) -> ApiError:
 
 
 def last_event_id(value: str | None) -> int | None:
+    """The seq a client resumes after: ASCII digits that fit 64 bits. ``str.isdigit`` alone
+    would pass ``²`` or ``٣`` (int() refuses the one, reads the other as 3)."""
     if value is None or value.strip() == "":
         return None
     text = value.strip()
-    if not text.isdigit() or len(text) > 19:
+    if not SEQ_NUMBER.fullmatch(text) or int(text) > MAX_INTEGER:
         raise ApiError(Reason.INVALID, f"Last-Event-ID must be the seq of an event received "
-                       f"(digits), got {value[:40]!r}")
+                       f"(digits), got {shown(value)}")
     return int(text)
 
 
@@ -83,6 +97,58 @@ def _keepalive() -> ServerSentEvent:
     return ServerSentEvent(comment="keepalive")
 
 
+class _Stream(EventSourceResponse):
+    """The SSE response of one client. A client that stopped reading is a dropped client,
+    like one that fell behind the hub's buffer: counted in
+    ``faultledger_stream_dropped_clients_total`` and logged in one line, never a traceback.
+    It is ended either here, by a send blocked for ``SEND_TIMEOUT_SEC`` (sse-starlette's
+    SendTimeoutError), or under the response by the server's connection layer closing a
+    connection that reads nothing (then the stream sees a disconnect while a send to it is
+    blocked, or right after one was blocked for ``BLOCKED_SEC`` or more)."""
+
+    BLOCKED_SEC = 1.0
+
+    def __init__(self, hub: StreamHub, after: int | None) -> None:
+        super().__init__(hub.events(after), ping=KEEPALIVE_SEC, ping_message_factory=_keepalive,
+                         send_timeout=SEND_TIMEOUT_SEC, headers={"X-Accel-Buffering": "no"})
+        self._hub = hub
+        self._sending_since: float | None = None
+        self._last_send_blocked = False
+        self._cut_while_blocked = False
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        loop = asyncio.get_running_loop()
+
+        async def timed_send(message: Message) -> None:
+            self._sending_since = started = loop.time()
+            try:
+                await send(message)
+            finally:
+                self._sending_since = None
+                self._last_send_blocked = loop.time() - started >= self.BLOCKED_SEC
+
+        async def watched_receive() -> Message:
+            message = await receive()
+            if message["type"] == "http.disconnect" and (
+                    self._sending_since is not None or self._last_send_blocked):
+                self._cut_while_blocked = True
+            return message
+
+        client = "{}:{}".format(*(scope.get("client") or ("?", 0)))
+        try:
+            await super().__call__(scope, watched_receive, timed_send)
+        except SendTimeoutError:
+            self._hub.dropped_clients += 1
+            log.warning("event stream of %s ended: a send was blocked for %d s (the client "
+                        "stopped reading); it resumes with Last-Event-ID", client,
+                        SEND_TIMEOUT_SEC)
+            return
+        if self._cut_while_blocked:
+            self._hub.dropped_clients += 1
+            log.warning("event stream of %s ended while a send to it was blocked (the client "
+                        "stopped reading); it resumes with Last-Event-ID", client)
+
+
 def router(context: Context) -> APIRouter:
     api = APIRouter(prefix="/api/v1", tags=["faults (ros2_medkit gateway)"])
     ledger = context.ledger
@@ -95,9 +161,7 @@ def router(context: Context) -> APIRouter:
                      last_event: Annotated[str | None, Header(alias="Last-Event-ID")] = None,
                      ) -> EventSourceResponse:
         after = last_event_id(last_event or request.query_params.get("last_event_id"))
-        return EventSourceResponse(context.hub.events(after), ping=KEEPALIVE_SEC,
-                                   ping_message_factory=_keepalive, send_timeout=30,
-                                   headers={"X-Accel-Buffering": "no"})
+        return _Stream(context.hub, after)
 
     cache = ListCache()
 
