@@ -406,7 +406,7 @@ def test_the_cli_counts_a_report_made_a_second_before(tmp_path: Path) -> None:
     figures = {line.split("│")[1].strip(): line.split("│")[2].strip()
                for line in shift.stdout.splitlines() if line.startswith("│")
                and line.count("│") == 6}
-    assert figures["activations"] == "1" and figures["aborted goals"] == "1"
+    assert figures["activations (all faults)"] == "1" and figures["aborted goals"] == "1"
 
 
 def test_upgrade_from_0002_computes_zero_goals_then_counts_new_ones(tmp_path: Path) -> None:
