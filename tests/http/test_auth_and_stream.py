@@ -188,7 +188,8 @@ def test_a_stalled_client_never_slows_the_writer_or_the_others(tmp_path: Path) -
         host, port = server.url.removeprefix("http://").rstrip("/").rsplit(":", 1)
         stalled = socket.create_connection((host, int(port)))
         stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        stalled.sendall(b"GET /api/v1/faults/stream HTTP/1.1\r\nHost: x\r\n\r\n")
+        stalled.sendall(f"GET /api/v1/faults/stream HTTP/1.1\r\nHost: {host}:{port}\r\n"
+                        "\r\n".encode())
         normal = Reader(server.url)
         time.sleep(0.5)
         flood(db, 3000, 100)

@@ -39,6 +39,10 @@ def _never(_code: str) -> bool:
     return False
 
 
+class TooManyRows(ValueError):
+    """A grouped query made more rows than ``from_facts`` was allowed (``max_rows``)."""
+
+
 @dataclass(slots=True)
 class _Tally:
     counts: list[int] = field(default_factory=lambda: [0] * len(_FLAGS))
@@ -128,9 +132,11 @@ def _add_episode(tally: _Tally, bounds: _Bounds, i: int, episode: Episode, end: 
 def from_facts(periods: Sequence[Period], facts: Iterable[StatFact],
                episodes: Iterable[Episode], as_of_ns: int,
                group_by: Sequence[str] = (), goals: Iterable[GoalFact] = (),
-               is_estop: IsEstop = _never) -> list[StatsRow]:
+               is_estop: IsEstop = _never, max_rows: int | None = None) -> list[StatsRow]:
     """Rows from individual facts and episodes (already filtered to the selected codes) and
-    goal outcomes; ``is_estop`` picks the activations counted as e-stops.
+    goal outcomes; ``is_estop`` picks the activations counted as e-stops. More than
+    ``max_rows`` (period, group) pairs with figures raise TooManyRows as soon as they are
+    counted, before their rows are made.
 
     Fault figures and goal figures have different keys: with ``action`` in ``group_by``
     the rows are per action and count goals only (a fault has no action); grouped by fault
@@ -147,9 +153,14 @@ def from_facts(periods: Sequence[Period], facts: Iterable[StatFact],
         for per_period in tallies:
             per_period[()] = _Tally()
 
+    made = [len(periods) if not group_by else 0]
+
     def tally_for(i: int, key: GroupKey) -> _Tally:
         found = tallies[i].get(key)
         if found is None:
+            made[0] += 1
+            if max_rows is not None and made[0] > max_rows:
+                raise TooManyRows(f"more than {max_rows} rows")
             found = tallies[i][key] = _Tally()
         return found
 

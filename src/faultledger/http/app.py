@@ -17,6 +17,8 @@ from faultledger.domain.shifts import ShiftCalendar
 from faultledger.http import errors, medkit
 from faultledger.http.auth import Authorizer, BodyLimit, Guarded
 from faultledger.http.context import Context
+from faultledger.http.heavy import HeavyReads
+from faultledger.http.protection import AllowedHosts, BrowserGuard
 from faultledger.http.stream import StreamHub
 from faultledger.service.config import HttpSettings
 from faultledger.service.ledger import FaultLedger
@@ -35,14 +37,16 @@ DOCS_ASSETS = "/static-offline-docs"
 
 
 def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalendar,
-               tokens: TokenBook, *, read_only: bool = False, loopback: bool = True
-               ) -> FastAPI:
+               tokens: TokenBook, *, hosts: AllowedHosts, read_only: bool = False,
+               loopback: bool = True) -> FastAPI:
     """``tokens`` are those in force at start; while the app runs a ``TokenWatcher`` follows
     the token file. ``loopback``: the server listens on loopback only, so it is open (every
-    request anonymous) whenever no token is configured."""
+    request anonymous) whenever no token is configured. ``hosts``: the Host values answered
+    (protection.py)."""
     hub = StreamHub(ledger, medkit.stream_data, settings.stream_buffer)
     authorizer = Authorizer(tokens, open_without_tokens=loopback)
-    context = Context(ledger, settings, calendar, authorizer, hub, read_only)
+    heavy = HeavyReads(settings.heavy_reads, settings.heavy_queue, settings.heavy_wait_sec)
+    context = Context(ledger, settings, calendar, authorizer, hub, read_only, heavy)
     watcher = TokenWatcher(settings, authorizer.replace)
 
     @asynccontextmanager
@@ -54,6 +58,7 @@ def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalen
         finally:
             watcher.stop()
             hub.stop()
+            heavy.close()
 
     # /docs (Swagger UI) from assets this server serves (fastapi-offline), not FastAPI's
     # CDN: a robot has no internet. No /redoc: ReDoc's page fetches Redocly's logo from a CDN.
@@ -73,4 +78,7 @@ def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalen
                            allow_methods=["GET", "POST", "DELETE"],
                            allow_headers=["Authorization", "Content-Type", "Last-Event-ID"])
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    # Outermost: a request for another host name (DNS rebinding) or a change from another
+    # origin is refused before anything else reads it; every answer gets the page headers.
+    app.add_middleware(BrowserGuard, hosts=hosts, cors_origins=settings.cors_origins)
     return app

@@ -48,6 +48,9 @@ class AnchorSettings(BaseModel):
     """Newest anchor files `serve` keeps in ``directory``; None: all."""
 
 
+HOST_PATTERN = (r"^(\*|[A-Za-z0-9]([A-Za-z0-9.-]{0,252})?(:\d{1,5})?"
+                r"|\[[0-9A-Fa-f:.]{2,45}\](:\d{1,5})?)$")
+"""An ``http.allowed_hosts`` entry: a name or address, optionally with a port, or ``*``."""
 TOKEN_NAME_PATTERN = r"^[A-Za-z0-9_.@-]{1,64}$"
 TOKEN_NAME_RULE = "1..64 characters: letters, digits, _ . @ -"
 
@@ -94,6 +97,38 @@ class HttpSettings(BaseModel):
     stream_buffer: int = Field(default=10_000, ge=100, le=1_000_000)
     """Notifications kept for stream clients; a client further behind is disconnected and
     resumes from the log with Last-Event-ID."""
+    # Limits (docs/http.md, "Limits"): what one client, or many, can make the server do.
+    allowed_hosts: list[Annotated[str, Field(pattern=HOST_PATTERN)]] = Field(
+        default_factory=list, max_length=256)
+    """Host names answered besides the listen address, localhost, 127.0.0.1 and [::1] (a
+    name alone: any port; ``name:port``: that port); ``*``: any Host. Others are refused 400
+    (DNS rebinding)."""
+    max_connections: int = Field(default=500, ge=8, le=100_000)
+    """Open connections; a new one beyond this closes the oldest idle or slow one, or is
+    refused 503 when every one is being answered. Capped below the open-files limit."""
+    header_timeout_sec: float = Field(default=10.0, gt=0, le=3600)
+    """A request's line and headers must arrive within this, from its first byte (a new
+    connection: from its opening)."""
+    body_timeout_sec: float = Field(default=30.0, gt=0, le=3600)
+    """A request's body must arrive within this, from the end of its headers."""
+    keep_alive_sec: int = Field(default=5, ge=1, le=3600)
+    """An idle keep-alive connection is closed after this (uvicorn's timeout_keep_alive)."""
+    send_timeout_sec: float = Field(default=30.0, gt=0, le=3600)
+    """A connection whose client reads nothing of an answer for this long is closed."""
+    max_header_bytes: int = Field(default=16 * 1024, ge=1024, le=1024 * 1024)
+    """Request line plus headers; more is answered 400 (h11's max incomplete event size)."""
+    heavy_reads: int = Field(default=1, ge=1, le=64)
+    """Statistics, history, state-at and shift reports computed at once (threads of their
+    own); more wait in a queue. One is fastest under Python's GIL (docs/performance.md)."""
+    heavy_queue: int = Field(default=16, ge=0, le=10_000)
+    """Heavy reads waiting for one of those; one more is answered 503 with Retry-After."""
+    heavy_wait_sec: float = Field(default=10.0, gt=0, le=600)
+    """How long a heavy read waits in the queue before it is answered 503 (Retry-After)."""
+    max_stats_rows: int = Field(default=10_000, ge=10, le=60_000)
+    """Rows one GET /api/v1/stats may answer: periods, or periods times groups."""
+    max_stats_records: int = Field(default=100_000, ge=1000, le=100_000_000)
+    """Facts, episodes and goal outcomes one GET /api/v1/stats may read (a query the
+    per-minute sums cannot answer: with code or group_by)."""
 
 
 class Settings(BaseModel):

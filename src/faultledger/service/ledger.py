@@ -319,14 +319,17 @@ class FaultLedger:
     def stats(self, by: str = "shift", since: datetime | str | None = None,
               until: datetime | str | None = None, codes: Sequence[str] | None = None,
               group_by: Sequence[str] = (), *, calendar: ShiftCalendar | None = None,
-              as_of: datetime | None = None) -> list[StatsRow]:
+              as_of: datetime | None = None,
+              budget: statistics.StatsBudget | None = None) -> list[StatsRow]:
         """Figures per period (and group) of docs/statistics.md over [since, until).
 
         Bounds may be datetimes, ISO dates or date-times (local to the calendar's zone) or
-        shift ids; ``as_of`` (default now) ends the CONFIRMED episodes still open.
+        shift ids; ``as_of`` (default now) ends the CONFIRMED episodes still open. A
+        ``budget`` refuses (InvalidInputError) a query that would do more work than it allows.
         """
         query = statistics.StatsQuery(by, since, until, codes, group_by,
-                                      calendar or self.calendar, as_of, self.estop_codes)
+                                      calendar or self.calendar, as_of, self.estop_codes,
+                                      budget)
         return statistics.compute(self._db, query)
 
     def downtimes(self, since: datetime, until: datetime, limit: int | None = None, *,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from datetime import datetime, timedelta
 from fnmatch import fnmatchcase
 
@@ -32,6 +33,23 @@ NS_PER_MINUTE = 60 * NS_PER_SECOND
 NS_PER_MICROSECOND = 1_000
 
 
+@dataclass(frozen=True, slots=True)
+class StatsBudget:
+    """The most work one ``stats`` call may do: the HTTP API sets one (docs/http.md,
+    "Limits"); without one only MAX_PERIODS applies. Each limit is checked before the work
+    it bounds: periods before any is cut, records by counting index entries before any row
+    is read, rows as the fold makes them."""
+
+    rows: int
+    """Rows of the answer: its periods, or (period, group) pairs with figures."""
+    records: int
+    """Facts, CONFIRMED episodes and goal outcomes read by a query the per-minute sums
+    cannot answer (``code`` or ``group_by`` given, or period edges off whole minutes)."""
+    rows_setting: str = ""
+    records_setting: str = ""
+    """Names of the settings behind the limits, shown in a refusal."""
+
+
 def open_end_ns(as_of_ns: int) -> int:
     """Where a range with no ``until`` ends: just after ``as_of`` (the start of the next
     microsecond, as a datetime can hold it), so what happened at ``as_of`` itself, also a
@@ -46,10 +64,12 @@ class StatsQuery:
     def __init__(self, by: str, since: datetime | str | None, until: datetime | str | None,
                  codes: Sequence[str] | None, group_by: Sequence[str],
                  calendar: ShiftCalendar, as_of: datetime | None,
-                 estop_codes: Sequence[str] = DEFAULT_ESTOP_CODES) -> None:
+                 estop_codes: Sequence[str] = DEFAULT_ESTOP_CODES,
+                 budget: StatsBudget | None = None) -> None:
         if not isinstance(by, str) or by not in PERIOD_KINDS:
             raise InvalidInputError(f"by must be one of {', '.join(PERIOD_KINDS)}, got "
                                     f"{validation.shown(by)}")
+        self.by = by
         self.group_by = _group_by(group_by)
         self.codes = _codes(codes)
         self.estop_codes = tuple(estop_codes)
@@ -66,12 +86,16 @@ class StatsQuery:
             raise InvalidInputError(f"since ({since_at.isoformat()}) must be before until "
                                     f"({until_at.isoformat()})")
         self.since_ns, self.until_ns = to_ns(since_at), to_ns(until_at)
+        self.budget = budget
+        most, setting = MAX_PERIODS, ""
+        if budget is not None and budget.rows < MAX_PERIODS:
+            most, setting = budget.rows, budget.rows_setting
         estimate = _estimate(by, since_at, until_at, calendar)
-        if estimate > MAX_PERIODS * 1.1:  # clearly too many: refused before cutting any
-            raise InvalidInputError(_too_many(f"about {estimate:,}", by))
-        self.periods: list[Period] = periods(by, since_at, until_at, calendar, MAX_PERIODS)
-        if len(self.periods) > MAX_PERIODS:
-            raise InvalidInputError(_too_many(f"more than {MAX_PERIODS:,}", by))
+        if estimate > most * 1.1:  # clearly too many: refused before cutting any
+            raise InvalidInputError(_too_many(f"about {estimate:,}", by, most, setting))
+        self.periods: list[Period] = periods(by, since_at, until_at, calendar, most)
+        if len(self.periods) > most:
+            raise InvalidInputError(_too_many(f"more than {most:,}", by, most, setting))
 
     def selects(self, code: str) -> bool:
         return self.codes is None or any(fnmatchcase(code, glob) for glob in self.codes)
@@ -99,9 +123,25 @@ def _estimate(by: str, since: datetime, until: datetime, calendar: ShiftCalendar
     return int(span / (week.total_seconds() * NS_PER_SECOND) * per_week)
 
 
-def _too_many(count: str, by: str) -> str:
-    return (f"the range holds {count} periods of {by}, the limit is {MAX_PERIODS:,}: narrow the "
-            "range or choose longer periods")
+def _too_many(count: str, by: str, most: int = MAX_PERIODS, setting: str = "") -> str:
+    named = f" ({setting})" if setting else ""
+    return (f"the range holds {count} periods of {by}, the limit is {most:,}{named}: narrow "
+            "the range or choose longer periods")
+
+
+def _too_many_records(budget: StatsBudget) -> str:
+    named = f" ({budget.records_setting})" if budget.records_setting else ""
+    return (f"this query would read more than {budget.records:,} records (facts, episodes "
+            f"and goal outcomes in the range), the limit is {budget.records:,}{named}: narrow "
+            "the range or select fewer codes; without code and group_by, on periods of whole "
+            "minutes, the figures come from per-minute sums and read few records")
+
+
+def _too_many_rows(budget: StatsBudget, by: str, periods: int) -> str:
+    named = f" ({budget.rows_setting})" if budget.rows_setting else ""
+    return (f"this query makes more than {budget.rows:,} rows ({periods:,} periods of {by} "
+            f"times its groups), the limit is {budget.rows:,}{named}: narrow the range, "
+            "choose longer periods, select fewer codes or group by fewer keys")
 
 
 def _group_by(group_by: Sequence[str]) -> tuple[str, ...]:
@@ -172,21 +212,34 @@ def compute(db: Database, query: StatsQuery) -> list[StatsRow]:
     """
     if not query.periods:
         return []
+    budget = query.budget
     with db.reading() as conn:
         if query.codes is None and not query.group_by and query.inner_minute_aligned():
             return stat_compute.from_sums(query.periods, _sums(conn, query), query.as_of_ns)
+        read_goals = not query.group_by or "action" in query.group_by
+        read_faults = "action" not in query.group_by
+        only = None
+        if read_faults and query.codes is not None:
+            only = [code for code in stat_tables.codes(conn) if query.selects(code)]
+        if budget is not None and stat_tables.count_records(
+                conn, query.since_ns, query.until_ns, only, faults=read_faults,
+                goals=read_goals, most=budget.records) > budget.records:
+            raise InvalidInputError(_too_many_records(budget))
         goals = []
-        if not query.group_by or "action" in query.group_by:
+        if read_goals:
             goals = stat_tables.goals(conn, query.since_ns, query.until_ns)
         facts, episodes = [], []
-        if "action" not in query.group_by:
-            only = None
-            if query.codes is not None:
-                only = [code for code in stat_tables.codes(conn) if query.selects(code)]
+        if read_faults:
             facts = stat_tables.facts(conn, query.since_ns, query.until_ns, only)
             episodes = stat_tables.episodes(conn, query.since_ns, query.until_ns, only)
-    return stat_compute.from_facts(query.periods, facts, episodes, query.as_of_ns,
-                                   query.group_by, goals, query.is_estop)
+    try:
+        return stat_compute.from_facts(query.periods, facts, episodes, query.as_of_ns,
+                                       query.group_by, goals, query.is_estop,
+                                       None if budget is None else budget.rows)
+    except stat_compute.TooManyRows:
+        assert budget is not None
+        raise InvalidInputError(_too_many_rows(budget, query.by,
+                                               len(query.periods))) from None
 
 
 def _whole_minutes(since_ns: int, until_ns: int) -> tuple[int, int, list[tuple[int, int]]]:

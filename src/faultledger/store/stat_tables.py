@@ -336,6 +336,39 @@ def episodes(conn: Connection, since_ns: int, until_ns: int,
     return found
 
 
+def count_records(conn: Connection, since_ns: int, until_ns: int,
+                  only: Sequence[str] | None, *, faults: bool, goals: bool, most: int) -> int:
+    """How many rows ``facts``, ``episodes`` (with ``faults``) and ``goals`` (with ``goals``)
+    would read for [since, until) and the codes ``only``, counted in their indexes without
+    reading a row; counting stops past ``most`` (a huge range costs no more to refuse than
+    one just over the limit)."""
+    e = stat_episodes.c
+    overlaps = or_(
+        and_(e.start_ns < until_ns, or_(e.end_ns.is_(None), e.end_ns > since_ns)),
+        and_(e.end_ns >= since_ns, e.end_ns < until_ns),
+    )
+    window = and_(stat_facts.c.at_ns >= since_ns, stat_facts.c.at_ns < until_ns)
+    found = 0
+
+    def capped(query: Any) -> int:
+        limited = query.limit(most + 1 - found).subquery()
+        return int(conn.execute(select(func.count()).select_from(limited)).scalar_one())
+
+    if goals:
+        found += capped(select(literal_column("1")).select_from(stat_goals).where(
+            stat_goals.c.at_ns >= since_ns, stat_goals.c.at_ns < until_ns))
+    if faults:
+        for chunk in _chunks(only):
+            for table, where in ((stat_facts, window), (stat_episodes, overlaps)):
+                if found > most:
+                    return found
+                query: Any = select(literal_column("1")).select_from(table).where(where)
+                if chunk is not None:
+                    query = query.where(table.c.fault_code.in_(chunk))
+                found += capped(query)
+    return found
+
+
 def _chunks(only: Sequence[str] | None) -> Iterable[Sequence[str] | None]:
     if only is None:
         yield None

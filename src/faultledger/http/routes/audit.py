@@ -10,11 +10,12 @@ from enum import StrEnum
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query
-from fastapi.responses import StreamingResponse
+from fastapi.responses import Response
 
 from faultledger.errors import InvalidInputError
 from faultledger.http import medkit
 from faultledger.http.context import Context
+from faultledger.http.heavy import SlotResponse, json_bytes, json_items
 from faultledger.service import times
 from faultledger.service.exports import export_row, write_csv, write_jsonl
 from faultledger.service.ledger import count_history, export_history, seq_recorded_by
@@ -64,7 +65,7 @@ def router(context: Context) -> APIRouter:
 
     @api.get("/history", summary="Log records (the audit trail), paged by seq either way",
              response_model=None)
-    def history(
+    async def history(
         code: Annotated[list[str] | None, Query(
             description="fault code or case-sensitive glob (repeatable: any)")] = None,
         source: str | None = None,
@@ -89,7 +90,7 @@ def router(context: Context) -> APIRouter:
             f"records per page (json: default {PAGE}); csv/jsonl: all when not given"))] = None,
         format: Format = Format.json,
         _: Principal = read,
-    ) -> Any:
+    ) -> Response:
         calendar = context.calendar
         if from_seq is not None and to_seq is not None and from_seq > to_seq:
             raise InvalidInputError(f"from_seq {from_seq} is after to_seq {to_seq}: the range "
@@ -116,47 +117,60 @@ def router(context: Context) -> APIRouter:
 
         if format is Format.json:
             page = limit or PAGE
-            rows = list(select(page + 1))
-            more = len(rows) > page
-            items = [export_row(row) for row in rows[:page]]
-            cursor = items[-1]["seq"] if more and items else None
-            answer: dict[str, Any] = {"items": items}
-            if order is Order.desc:
-                answer["next_before_seq"] = cursor
-            else:
-                answer["next_after_seq"] = cursor
-            if total:
-                answer["total"] = count_history(ledger, **filters)
-            return answer
-        rows_iter = select(limit)
-        first_row = next(rows_iter, None)  # bad filters fail here, before any byte is sent
 
-        def all_rows() -> Iterator[StoredRecord]:
-            if first_row is not None:
-                yield first_row
-                yield from rows_iter
+            def json_page() -> Iterator[bytes]:
+                # In the heavy pool: at most MOST records, sent in chunks.
+                rows = list(select(page + 1))
+                more = len(rows) > page
+                del rows[page:]
+                cursor = rows[-1].seq if more and rows else None
+                extra: dict[str, Any] = {("next_before_seq" if order is Order.desc
+                                          else "next_after_seq"): cursor}
+                if total:
+                    extra["total"] = count_history(ledger, **filters)
+                return json_items(rows, export_row, extra)
 
+            return SlotResponse(context.heavy, json_page, "application/json")
+
+        def export() -> Iterator[bytes]:
+            rows_iter = select(limit)
+            first_row = next(rows_iter, None)  # bad filters fail here, before any byte is sent
+
+            def all_rows() -> Iterator[StoredRecord]:
+                if first_row is not None:
+                    yield first_row
+                    yield from rows_iter
+
+            write = write_csv if format is Format.csv else write_jsonl
+            return (text.encode() for text in _chunks(all_rows(), write))
+
+        # Every record: a chunk at a time in the heavy pool, other heavy reads between.
         if format is Format.csv:
-            return StreamingResponse(_chunks(all_rows(), write_csv), media_type="text/csv",
-                                     headers=_attachment("history.csv"))
-        return StreamingResponse(_chunks(all_rows(), write_jsonl),
-                                 media_type="application/x-ndjson",
-                                 headers=_attachment("history.jsonl"))
+            return SlotResponse(context.heavy, export, "text/csv",
+                                _attachment("history.csv"), per_chunk=True)
+        return SlotResponse(context.heavy, export, "application/x-ndjson",
+                            _attachment("history.jsonl"), per_chunk=True)
 
-    @api.get("/state-at", summary="Faults as they stood after a seq or at a time")
-    def state_at(at: Annotated[str, Query(
-                     description="a seq number, or a time: shift id, date or date-time")],
-                 status: str = "all", _: Principal = read) -> dict[str, Any]:
+    @api.get("/state-at", summary="Faults as they stood after a seq or at a time",
+             response_model=None, responses={200: {"content": {"application/json": {}}}})
+    async def state_at(at: Annotated[str, Query(
+                           description="a seq number, or a time: shift id, date or date-time")],
+                       status: str = "all", _: Principal = read) -> Response:
         moment = times.parse_moment(at, "at", context.calendar)
         wanted = medkit.STATUS_GROUPS.get(status)
         if wanted is None:
             raise InvalidInputError(f"status must be one of {medkit.ALLOWED_STATUS_VALUES}, "
                                     f"got {status[:40]!r}")
-        seq = seq_recorded_by(ledger, moment)
-        faults = [f for f in ledger.state_at(seq) if f.status in wanted]
-        answer = medkit.fault_list(faults)
-        answer["x-medkit"]["seq"] = seq
-        return answer
+
+        def produce() -> Iterator[bytes]:
+            # In the heavy pool: replaying a long log prefix takes a while.
+            seq = seq_recorded_by(ledger, moment)
+            faults = [f for f in ledger.state_at(seq) if f.status in wanted]
+            answer = medkit.fault_list(faults)
+            answer["x-medkit"]["seq"] = seq
+            return iter([json_bytes(answer)])
+
+        return SlotResponse(context.heavy, produce, "application/json")
 
     return api
 
