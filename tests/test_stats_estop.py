@@ -17,6 +17,7 @@ from faultledger import FaultLedger, Policy
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import StatsRow
 from faultledger.errors import InvalidInputError
+from tests.cli_stats_scenario import CALENDAR_YAML as SHIFTS_YAML
 
 BERLIN = ZoneInfo("Europe/Berlin")
 CALENDAR = ShiftCalendar.model_validate({
@@ -239,15 +240,6 @@ def test_the_estop_codes_are_configurable(db_url: str) -> None:
 def test_bad_estop_codes_are_refused(db_url: str, bad: object) -> None:
     with pytest.raises(InvalidInputError):
         FaultLedger.open(db_url, estop_codes=bad)  # type: ignore[arg-type]
-
-
-SHIFTS_YAML = """\
-timezone: Europe/Berlin
-shifts:
-  - {name: morning, start: "06:00", end: "14:00"}
-  - {name: afternoon, start: "14:00", end: "22:00"}
-  - {name: night, start: "22:00", end: "06:00"}
-"""
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:

@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 
 from faultledger import FaultLedger
+from tests.cli_stats_scenario import CALENDAR_YAML as SHIFTS
 from tests.http.conftest import SHOTS, Server, needs_browser, start_server, write_config
 
 webdriver = pytest.importorskip("selenium.webdriver")
@@ -25,13 +26,6 @@ pytestmark = needs_browser
 CODE = "LIDAR_FRONT_TIMEOUT"
 T0 = datetime(2026, 11, 20, 12, 0, tzinfo=UTC)  # 13:00 in Berlin (CET), 07:00 in New York
 REPORTS = 300
-SHIFTS = """\
-timezone: Europe/Berlin
-shifts:
-  - {name: morning, start: "06:00", end: "14:00"}
-  - {name: afternoon, start: "14:00", end: "22:00"}
-  - {name: night, start: "22:00", end: "06:00"}
-"""
 OTHERS = {"BATTERY_LOW": 1, "CAMERA_DROPPED_FRAMES": 0, "DRIVE_OVERCURRENT": 2,
           "HW_BASE_EMERGENCY_STOP": 3}
 

@@ -15,6 +15,7 @@ from zoneinfo import ZoneInfo
 import pytest
 
 from faultledger import FaultLedger
+from tests.cli_stats_scenario import CALENDAR_YAML as SHIFTS_YAML
 from tests.http.conftest import SHOTS, Server, needs_browser, start_server, write_config
 
 webdriver = pytest.importorskip("selenium.webdriver")
@@ -26,13 +27,6 @@ pytestmark = needs_browser
 
 BERLIN = ZoneInfo("Europe/Berlin")
 SHIFTS = {"morning": 6, "afternoon": 14, "night": 22}
-SHIFTS_YAML = """\
-timezone: Europe/Berlin
-shifts:
-  - {name: morning, start: "06:00", end: "14:00"}
-  - {name: afternoon, start: "14:00", end: "22:00"}
-  - {name: night, start: "22:00", end: "06:00"}
-"""
 DAY = datetime.now(BERLIN).date() - timedelta(days=1)
 """The production day of the shift looked at: yesterday, so every shift of it has started."""
 CHOSEN = f"{DAY}/afternoon"

@@ -8,15 +8,9 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 from faultledger import FaultLedger
+from tests.cli_stats_scenario import CALENDAR_YAML as SHIFTS
 from tests.http.conftest import start_server, write_config
 
-SHIFTS = """\
-timezone: Europe/Berlin
-shifts:
-  - {name: morning, start: "06:00", end: "14:00"}
-  - {name: afternoon, start: "14:00", end: "22:00"}
-  - {name: night, start: "22:00", end: "06:00"}
-"""
 AFTERNOON = "2026-11-25/afternoon"
 
 
