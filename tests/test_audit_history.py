@@ -26,7 +26,7 @@ from faultledger.domain.clock import to_ns
 from faultledger.domain.events import KINDS, LogRecord
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
 from faultledger.errors import InvalidInputError
-from faultledger.service.ledger import export_history
+from faultledger.service.audit import export_history
 from faultledger.service.requests import ReportRequest
 from faultledger.store import event_log
 

@@ -22,7 +22,7 @@ from faultledger import FaultLedger, VerifyReport
 from faultledger.cli import render
 from faultledger.domain.integrity import GENESIS_HASH, record_hash
 from faultledger.errors import InvalidInputError
-from faultledger.service.ledger import seq_recorded_by, seqs_recorded_between
+from faultledger.service.audit import seq_recorded_by, seqs_recorded_between
 from tests.test_tamper import CLI, build_log, edit_payload, swap_payloads, tamper
 
 

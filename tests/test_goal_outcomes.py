@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from faultledger import FaultLedger, GoalOutcomeRequest, Notification, Policy
 from faultledger.domain.events import GOAL_OUTCOME_NAMESPACE, GoalOutcome
-from faultledger.service.ledger import export_history
+from faultledger.service.audit import export_history
 
 NAV = "/nav/navigate_to_pose"
 T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)

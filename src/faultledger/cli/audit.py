@@ -48,14 +48,10 @@ from faultledger.service.anchors import (
     verify_anchors,
     with_anchors,
 )
+from faultledger.service.audit import export_history, seq_recorded_by, seqs_recorded_between
 from faultledger.service.config import config_path, load_settings
 from faultledger.service.exports import Writer, write_csv, write_jsonl
-from faultledger.service.ledger import (
-    FaultLedger,
-    export_history,
-    seq_recorded_by,
-    seqs_recorded_between,
-)
+from faultledger.service.ledger import FaultLedger
 from faultledger.service.output_files import OutputFileError, check_target, open_text_output
 from faultledger.store.event_log import StoredRecord
 

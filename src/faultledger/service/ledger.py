@@ -5,9 +5,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
-import uuid
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
 from datetime import datetime
 from types import TracebackType
 
@@ -15,14 +14,7 @@ from sqlalchemy import Connection
 
 from faultledger.domain import queries, validation
 from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
-from faultledger.domain.events import (
-    KINDS,
-    FaultCleared,
-    FaultReported,
-    GoalOutcome,
-    LogRecord,
-    goal_event_id,
-)
+from faultledger.domain.events import FaultCleared, LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.notifications import Notification
 from faultledger.domain.periods import default_calendar
@@ -30,15 +22,24 @@ from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Projector, Transition
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES, StatsRow
-from faultledger.domain.statistics import StatsFold
 from faultledger.errors import (
     DamagedDatabaseError,
     FaultLedgerError,
     InvalidInputError,
     Reason,
 )
-from faultledger.service import statistics
+from faultledger.service import audit, statistics
+from faultledger.service.arguments import aware_ns, check_limit, record_filter, seq_number
+from faultledger.service.commands import goal_command, report_command
 from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
+from faultledger.service.restore import (
+    DAMAGED,
+    UnreadableRecord,
+    apply_all,
+    replay,
+    restore,
+    stats_of,
+)
 from faultledger.service.results import (
     ClearResult,
     Downtime,
@@ -55,13 +56,11 @@ from faultledger.service.writer import (
     ConfirmOverdue,
     Exclusive,
     ReclassifyHealed,
-    RecordGoal,
     RecordPolicy,
-    Report,
     Writer,
     clipped,
 )
-from faultledger.store import event_log, integrity_check, migrate, projections, stat_tables
+from faultledger.store import event_log, migrate, projections, stat_tables
 from faultledger.store.database import Database, describe
 
 log = logging.getLogger(__name__)
@@ -122,7 +121,7 @@ class FaultLedger:
         db = Database(url, create=create)
         try:
             migrate.ensure_current(db, upgrade=upgrade)
-            projector, restored = _restore(db)
+            projector, events, replayed = restore(db)
         except FaultLedgerError:
             db.dispose()
             raise
@@ -135,6 +134,7 @@ class FaultLedger:
         except BaseException:
             db.dispose()
             raise
+        restored = Restored(events, len(projector.committed()), replayed)
         ledger = cls(db, projector, policy, max_batch, restored)
         if calendar is not None:
             ledger.calendar = calendar
@@ -198,7 +198,7 @@ class FaultLedger:
         For a caller that receives reports in bursts (a ROS service draining its queue, a
         bridge translating one message into many reports): one wait instead of one per report.
         """
-        return self._submit_checked([_report_command(request) for request in requests])
+        return self._submit_checked([report_command(request) for request in requests])
 
     def record_goal_outcome(self, action: str, goal_id: str, status: str, server_node: str = "",
                             at: datetime | None = None) -> ReportResult:
@@ -214,7 +214,7 @@ class FaultLedger:
     def record_goal_outcomes(self, requests: Sequence[GoalOutcomeRequest]
                              ) -> list[ReportResult]:
         """Record several goal outcomes in order, sharing commits; one result per request."""
-        return self._submit_checked([_goal_command(request) for request in requests])
+        return self._submit_checked([goal_command(request) for request in requests])
 
     def _submit_checked(self, checked: list[Command | ReportResult]) -> list[ReportResult]:
         """Submit the valid commands together; a rejection stays in its request's place."""
@@ -251,11 +251,11 @@ class FaultLedger:
         """Drop the projections and replay the whole log; returns the records replayed."""
 
         def action(conn: Connection, writer: Writer) -> int:
-            projector, replayed = _replay(conn)
+            projector, replayed = replay(conn)
             projections.replace_all(conn, projector.committed(), replayed,
                                     projections.Checkpoint(*event_log.head(conn),
                                                            projector.policy_seq))
-            stat_tables.replace_all(conn, _stats(projector).take(), projector.seq)
+            stat_tables.replace_all(conn, stats_of(projector).take(), projector.seq)
             writer.projector = projector
             return projector.seq
 
@@ -312,7 +312,7 @@ class FaultLedger:
         raises InvalidInputError rather than answering nothing. For exports of any size,
         ``export_history`` streams the same selection as stored rows.
         """
-        where = _record_filter(code, since, until, source, kinds, limit, codes, from_seq, to_seq)
+        where = record_filter(code, since, until, source, kinds, limit, codes, from_seq, to_seq)
         with self._db.reading() as conn:
             return event_log.find(conn, where)
 
@@ -340,9 +340,9 @@ class FaultLedger:
         An episode still open ends at ``as_of`` (default now), as in ``stats``; episodes
         with no time inside the range (0 s, or starting after ``as_of``) are left out.
         """
-        since_ns, until_ns = _aware_ns(since, "since"), _aware_ns(until, "until")
-        as_of_ns = time.time_ns() if as_of is None else _aware_ns(as_of, "as_of")
-        _check_limit(limit)
+        since_ns, until_ns = aware_ns(since, "since"), aware_ns(until, "until")
+        as_of_ns = time.time_ns() if as_of is None else aware_ns(as_of, "as_of")
+        check_limit(limit)
         if since_ns >= until_ns:
             raise InvalidInputError("since must be before until")
         with self._db.reading() as conn:
@@ -365,13 +365,13 @@ class FaultLedger:
 
     def state_at(self, when: datetime | int) -> list[Fault]:
         """Faults (any status) after the log prefix up to seq ``when``, or recorded by a time."""
-        upto = _seq(when, "when") if isinstance(when, int) else _aware_ns(when, "when")
+        upto = seq_number(when, "when") if isinstance(when, int) else aware_ns(when, "when")
         with self._db.reading() as conn:
             if not isinstance(when, int):
                 upto = event_log.last_seq_recorded_by(conn, upto)
             projector = Projector()
             try:
-                _apply_all(projector, event_log.read(conn, upto_seq=upto))
+                apply_all(projector, event_log.read(conn, upto_seq=upto))
             except UnreadableRecord as error:
                 raise DamagedDatabaseError(f"{error}: {DAMAGED}; restore a backup") from error
         return sorted(projector.committed(), key=lambda f: f.fault_code)
@@ -386,35 +386,7 @@ class FaultLedger:
         The whole-log check also runs the database's own integrity check (SQLite); a segment
         does not (it reads only its records).
         """
-        if from_seq is not None or to_seq is not None:
-            return _verify_segment(self._db, 1 if from_seq is None else from_seq, to_seq)
-        return _with_storage_damage(self._db, self._verify_log)
-
-    def _verify_log(self) -> VerifyReport:
-        with self._db.reading() as conn:
-            chain = event_log.check_chain(conn)
-            checkpoint = projections.load_checkpoint(conn)
-            problems = [chain.problem] if chain.problem else []
-            first_bad = chain.first_bad_seq
-            if chain.problem is None:
-                if checkpoint.seq > chain.head_seq:
-                    first_bad = chain.head_seq + 1
-                    problems.append(
-                        f"the log ends at seq {chain.head_seq} but the projections include seq "
-                        f"{checkpoint.seq}: records {chain.head_seq + 1}..{checkpoint.seq} were "
-                        "deleted")
-                elif checkpoint.seq == chain.head_seq and checkpoint.hash != chain.head_hash:
-                    first_bad = chain.head_seq
-                    problems.append(f"record {chain.head_seq} differs from the recorded head")
-            if not problems:
-                try:
-                    problems.extend(_projection_problems(conn, checkpoint))
-                except UnreadableRecord as error:  # its hash matches: rehashed, or written so
-                    first_bad = error.seq
-                    problems.append(f"{error}: {DAMAGED} (its hash and those after it match: "
-                                    "they were recomputed, or it was written so)")
-        return VerifyReport(not problems, chain.records, chain.head_seq, chain.head_hash,
-                            first_bad, problems)
+        return audit.verify(self._db, from_seq, to_seq)
 
     # -- notifications ---------------------------------------------------------------------------
     def notifications_after(self, seq: int, limit: int = 1000) -> list[Notification]:
@@ -424,8 +396,8 @@ class FaultLedger:
 
         Only the faults those records touch are replayed, unless there are very many.
         """
-        seq = _seq(seq, "seq")
-        _check_limit(limit)
+        seq = seq_number(seq, "seq")
+        check_limit(limit)
         found: list[Notification] = []
         with self._db.reading() as conn:
             codes = event_log.codes_after(conn, seq, _SELECTIVE_REPLAY_CODES)
@@ -494,398 +466,3 @@ class FaultLedger:
     def _tick_interval(self) -> float:
         after = self.policy.auto_confirm_after_sec
         return 1.0 if after <= 0 else min(1.0, max(0.05, after / 10))
-
-
-def _canonical_event_id(event_id: object) -> str | None:
-    """The one spelling of a UUID the log stores and the idempotency check compares: lowercase
-    and hyphenated. Every spelling ``uuid.UUID`` reads (upper case, ``{…}``, ``urn:uuid:…``,
-    no hyphens) is the same report. None: not a UUID."""
-    if not isinstance(event_id, str) or len(event_id) > 64:
-        return None
-    try:
-        return str(uuid.UUID(event_id))
-    except ValueError:
-        return None
-
-
-DAMAGED = "its content is damaged or was edited"
-
-
-class UnreadableRecord(Exception):
-    """A stored record this code cannot decode or apply: a damaged or edited payload (valid
-    records never fail a replay), named by its seq."""
-
-    def __init__(self, seq: int, error: BaseException) -> None:
-        super().__init__(f"record seq {seq} cannot be read back ({clipped(error, 200)})")
-        self.seq = seq
-
-
-def _apply_all(projector: Projector, records: Iterable[LogRecord]) -> list[Transition]:
-    """``projector.apply_all`` over consecutive records; a record that cannot be decoded (in
-    the store's read) or applied raises UnreadableRecord with its seq. Database errors
-    (locked, I/O) pass unchanged."""
-    reading = iter(records)
-
-    def checked() -> Iterator[LogRecord]:
-        while True:
-            try:
-                record = next(reading)
-            except StopIteration:
-                return
-            except FaultLedgerError:
-                raise
-            except Exception as error:  # decoding the next record failed
-                raise UnreadableRecord(projector.seq + 1, error) from error
-            yield record
-
-    try:
-        return projector.apply_all(checked())
-    except (UnreadableRecord, FaultLedgerError):
-        raise
-    except Exception as error:  # applying the record projector.seq failed
-        raise UnreadableRecord(projector.seq, error) from error
-
-
-def _replay(conn: Connection, upto: int | None = None) -> tuple[Projector, list[Transition]]:
-    projector = Projector(stats=StatsFold())
-    return projector, _apply_all(projector, event_log.read(conn, upto_seq=upto))
-
-
-def _stats(projector: Projector) -> StatsFold:
-    assert projector.stats is not None, "this projector feeds no statistics"
-    return projector.stats
-
-
-def _restore(db: Database) -> tuple[Projector, Restored]:
-    """Persisted projections plus a replay of the records after their checkpoint."""
-    with db.reading() as conn:
-        checkpoint = projections.load_checkpoint(conn)
-        policy = event_log.policy_at(conn, checkpoint.policy_seq)
-        stats_seq = stat_tables.checkpoint_seq(conn)
-        tracks = stat_tables.load_tracks(conn) if stats_seq == checkpoint.seq else None
-        projector = Projector(
-            projections.load_faults(conn),
-            Policy.model_validate(policy.policy) if policy else None,
-            checkpoint.seq,
-            policy_recorded=policy is not None,
-            policy_seq=checkpoint.policy_seq,
-            stats=StatsFold(tracks),
-        )
-        stored_seq = event_log.head(conn)[0]
-    if tracks is None:
-        projector.stats = _catch_up_statistics(db, checkpoint.seq, stats_seq)
-    if stored_seq < checkpoint.seq:
-        log.warning("the log ends at seq %d but the projections include seq %d: records were "
-                    "deleted; writes are refused (run `faultledger verify`)",
-                    stored_seq, checkpoint.seq)
-    replayed = max(0, stored_seq - checkpoint.seq)
-    if replayed:
-        projector = _persist_tail(db, projector)
-    faults = len(projector.committed())
-    return projector, Restored(stored_seq, faults, replayed)
-
-
-def _persist_tail(db: Database, projector: Projector) -> Projector:
-    """Bring lagging projections up to the log (in memory, and on disk when writable)."""
-    try:
-        with db.writing() as conn:
-            projector.stage()
-            found = _apply_all(projector, event_log.read(conn, after_seq=projector.seq))
-            projections.save(conn, projector.staged_faults(), found,
-                             projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
-            stat_tables.save(conn, _stats(projector).take(), projector.seq)
-        projector.commit()
-    except FaultLedgerError as error:
-        projector.rollback()
-        log.warning("projections lag the log and cannot be saved (%s); replaying in memory",
-                    error)
-        with db.reading() as conn:
-            _apply_all(projector, event_log.read(conn, after_seq=projector.seq))
-        _stats(projector).take()
-    return projector
-
-
-def _catch_up_statistics(db: Database, upto: int, stats_seq: int) -> StatsFold:
-    """Statistics tables behind the projections (first open after the upgrade that created
-    them): fold the log up to the projections' seq and write them all."""
-    with db.reading() as conn:
-        replayed = Projector(stats=StatsFold())
-        _apply_all(replayed, event_log.read(conn, upto_seq=upto))
-    fold = _stats(replayed)
-    output = fold.take()
-    log.info("statistics include seq %d of %d: computing them from the log", stats_seq, upto)
-    try:
-        with db.writing() as conn:
-            stat_tables.replace_all(conn, output, upto)
-    except FaultLedgerError as error:
-        log.warning("statistics cannot be saved (%s); they are incomplete until a writer "
-                    "opens this database", error)
-    return StatsFold(fold.tracks())
-
-
-def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -> list[str]:
-    expected, expected_transitions = _replay(conn, checkpoint.seq)
-    stored = projections.load_faults(conn)
-    problems: list[str] = []
-    replayed = {f.fault_code: f for f in expected.committed()}
-    for code in sorted(set(stored) | set(replayed)):
-        if stored.get(code) != replayed.get(code):
-            problems.append(f"projection of fault {code} differs from a full replay of the log")
-    if projections.load_transitions(conn) != expected_transitions:
-        problems.append("transitions table differs from a full replay of the log")
-    if stat_tables.checkpoint_seq(conn) == checkpoint.seq:
-        problems.extend(stat_tables.differences(conn, _stats(expected).take()))
-    else:
-        problems.append(f"statistics include seq {stat_tables.checkpoint_seq(conn)}, the "
-                        f"projections {checkpoint.seq}")
-    if checkpoint.policy_seq != expected.policy_seq:
-        problems.append(f"checkpoint names record {checkpoint.policy_seq} as the policy in force, "
-                        f"a replay finds {expected.policy_seq}")
-    return problems
-
-
-def _report_command(request: ReportRequest) -> Report | ReportResult:
-    """The writer's command for a valid report, else the rejection naming the problem.
-
-    Every field is checked here, before the report joins a group commit: one bad report must
-    never fail the commit it would share with valid ones (the writer isolates one that
-    still does, as a last resort).
-    """
-    if not isinstance(request, ReportRequest):
-        return ReportResult(False, f"expected a ReportRequest, got {type(request).__name__}")
-    kind = validation.parse_event_type(request.event_type)
-    problem = validation.report_error(request.fault_code, request.event_type, request.severity,
-                                      request.description, request.source_id)
-    event_id = None
-    if problem is None and request.event_id is not None:
-        event_id = _canonical_event_id(request.event_id)
-        if event_id is None:
-            problem = f"event_id must be a UUID, got {validation.shown(request.event_id)}"
-    if problem is None and request.at is not None:
-        problem = validation.time_error("at", request.at)
-    if problem is not None or kind is None:
-        return ReportResult(False, problem or "invalid report")
-    occurred_ns = time.time_ns() if request.at is None else to_ns(request.at)
-    event = FaultReported(request.fault_code, kind, request.severity, request.description,
-                          request.source_id)
-    return Report(event, occurred_ns, event_id or str(uuid.uuid4()), event_id is not None)
-
-
-def _goal_command(request: GoalOutcomeRequest) -> RecordGoal | ReportResult:
-    """The writer's command for a valid goal outcome, else the rejection naming the problem
-    (checked before it joins a group commit, like a report)."""
-    if not isinstance(request, GoalOutcomeRequest):
-        return ReportResult(False, f"expected a GoalOutcomeRequest, got {type(request).__name__}")
-    problem = validation.goal_outcome_error(request.action, request.goal_id, request.status,
-                                            request.server_node)
-    if problem is None and request.at is not None:
-        problem = validation.time_error("at", request.at)
-    if problem is not None:
-        return ReportResult(False, problem)
-    occurred_ns = time.time_ns() if request.at is None else to_ns(request.at)
-    event = GoalOutcome(request.action, request.goal_id, request.status, request.server_node)
-    return RecordGoal(event, occurred_ns, goal_event_id(request.action, request.goal_id))
-
-
-# -- audit: filtered and streamed history, verification of a segment, prefixes by time -------
-def export_history(ledger: FaultLedger, code: str | None = None,
-                   since: datetime | int | None = None, until: datetime | int | None = None,
-                   source: str | None = None, kinds: Iterable[str] = (),
-                   limit: int | None = None, *, codes: Sequence[str] | None = None,
-                   from_seq: int | None = None, to_seq: int | None = None,
-                   descending: bool = False) -> Iterator[event_log.StoredRecord]:
-    """``history``'s selection as stored rows with their predecessor's hash, streamed
-    (``descending``: newest first, and ``limit`` keeps the newest).
-
-    For exports of any size: rows are fetched in chunks inside one read transaction while the
-    caller consumes them (a consistent snapshot). The filter is checked here, before the
-    first row, so bad input fails before anything is written.
-    """
-    where = _record_filter(code, since, until, source, kinds, limit, codes, from_seq, to_seq)
-    return _stored_rows(ledger._db, replace(where, descending=descending))
-
-
-def count_history(ledger: FaultLedger, code: str | None = None,
-                  since: datetime | int | None = None, until: datetime | int | None = None,
-                  source: str | None = None, kinds: Iterable[str] = (), *,
-                  codes: Sequence[str] | None = None, from_seq: int | None = None,
-                  to_seq: int | None = None) -> int:
-    """How many records ``history`` selects with these filters (no limit)."""
-    where = _record_filter(code, since, until, source, kinds, None, codes, from_seq, to_seq)
-    with ledger._db.reading() as conn:
-        return event_log.count_matching(conn, where)
-
-
-def _stored_rows(db: Database, where: event_log.RecordFilter
-                 ) -> Iterator[event_log.StoredRecord]:
-    with db.reading() as conn:
-        yield from event_log.iter_stored(conn, where)
-
-
-def seq_recorded_by(ledger: FaultLedger, when: datetime | int) -> int:
-    """The last seq of the log prefix ``state_at(when)`` replays, so it can be named and
-    verified: a seq is checked against the log, a time maps to the records recorded by it."""
-    with ledger._db.reading() as conn:
-        if isinstance(when, int):
-            when = _seq(when, "seq")
-            head_seq = event_log.head(conn)[0]
-            if not 0 <= when <= head_seq:
-                raise InvalidInputError(f"seq {when} is not in the log (seq 0..{head_seq})")
-            return when
-        return event_log.last_seq_recorded_by(conn, _aware_ns(when, "when"))
-
-
-def seqs_recorded_between(ledger: FaultLedger, since: datetime | None,
-                          until: datetime | None) -> tuple[int, int | None]:
-    """Inclusive seq range of the records recorded in [since, until]: a contiguous segment
-    that ``verify`` can check (``occurred_at`` is the reporter's and not in seq order).
-
-    ``until`` ends where ``state_at(until)``'s prefix ends; None means up to the head.
-    """
-    with ledger._db.reading() as conn:
-        start = 1 if since is None else event_log.last_seq_recorded_by(
-            conn, _aware_ns(since, "since") - 1) + 1
-        end = None if until is None else event_log.last_seq_recorded_by(
-            conn, _aware_ns(until, "until"))
-        head_seq = event_log.head(conn)[0]
-    if start > (head_seq if end is None else end):
-        window = " and ".join(f"{name} {moment.isoformat()}" for name, moment
-                              in (("since", since), ("until", until)) if moment is not None)
-        raise InvalidInputError(f"no record of the log (seq 1..{head_seq}) was recorded within "
-                                f"{window}")
-    return start, end
-
-
-def _with_storage_damage(db: Database, check: Callable[[], VerifyReport]) -> VerifyReport:
-    """``check`` after the database's own integrity check; damage fails the report. A damaged
-    file may also break the check itself: then the damage and that error are the report."""
-    with db.reading() as conn:
-        damage = integrity_check.storage_damage(conn)
-    if not damage:
-        return check()
-    try:
-        report = check()
-    except Exception as error:  # any failure reading a file known to be damaged
-        return VerifyReport(False, 0, 0, "", None,
-                            [*damage, f"the log could not be checked: {error}"])
-    return VerifyReport(False, report.records, report.head_seq, report.head_hash,
-                        report.first_bad_seq, [*damage, *report.problems])
-
-
-def _verify_segment(db: Database, from_seq: int, to_seq: int | None) -> VerifyReport:
-    """``verify`` over [from_seq, to_seq]: the chain segment and the checkpoint inside it."""
-    _check_seq_range(from_seq, to_seq)
-    with db.reading() as conn:
-        chain = event_log.check_chain(conn, from_seq, to_seq)
-        problems = [chain.problem] if chain.problem else []
-        first_bad = chain.first_bad_seq
-        if chain.problem is None:
-            found = _checkpoint_problem(conn, from_seq, to_seq, chain)
-            if found is not None:
-                first_bad = found[0]
-                problems.append(found[1])
-    return VerifyReport(not problems, chain.records, chain.head_seq, chain.head_hash, first_bad,
-                        problems)
-
-
-def _checkpoint_problem(conn: Connection, from_seq: int, to_seq: int | None,
-                        chain: event_log.ChainCheck) -> tuple[int, str] | None:
-    """The checkpoint names (seq, hash) of a record: it must exist and match when the verified
-    segment is open-ended or holds that seq (catches a rewritten head with a fresh hash)."""
-    checkpoint = projections.load_checkpoint(conn)
-    if to_seq is None and checkpoint.seq > chain.head_seq:
-        return chain.head_seq + 1, (
-            f"the log ends at seq {chain.head_seq} but the projections include seq "
-            f"{checkpoint.seq}: records {chain.head_seq + 1}..{checkpoint.seq} were deleted")
-    if (from_seq <= checkpoint.seq <= chain.head_seq
-            and event_log.hash_at(conn, checkpoint.seq) != checkpoint.hash):
-        return checkpoint.seq, f"record {checkpoint.seq} differs from the recorded head"
-    return None
-
-
-def _record_filter(code: str | None, since: datetime | int | None, until: datetime | int | None,
-                   source: str | None, kinds: Iterable[str], limit: int | None,
-                   codes: Sequence[str] | None, from_seq: int | None, to_seq: int | None
-                   ) -> event_log.RecordFilter:
-    """A checked history filter: bad input is an InvalidInputError naming it, never a silently
-    empty answer (a misspelt kind would otherwise look like "nothing happened")."""
-    wanted = _strings(kinds, "kinds")
-    unknown = [kind for kind in wanted if kind not in KINDS]
-    if unknown:
-        named = ", ".join(validation.shown(kind, 40) for kind in unknown[:5])
-        raise InvalidInputError(f"unknown record kind {named}; valid "
-                                f"kinds: {', '.join(KINDS)}")
-    patterns = _strings(codes, "codes")
-    if len(patterns) > statistics.MAX_PATTERNS:
-        raise InvalidInputError(f"codes takes at most {statistics.MAX_PATTERNS} patterns")
-    for name, value, size in (*(("a code pattern", c, statistics.MAX_PATTERN_LENGTH)
-                                for c in patterns),
-                              ("code", code, validation.MAX_FAULT_CODE_LENGTH),
-                              ("source", source, validation.MAX_SOURCE_ID_LENGTH)):
-        problem = None if value is None else validation.text_error(name, value, size)
-        if problem:
-            raise InvalidInputError(problem)
-    _check_seq_range(from_seq, to_seq)
-    _check_limit(limit)
-    return event_log.RecordFilter(
-        fault_code=code, source_id=source, since_ns=_bound_ns(since, "since"),
-        until_ns=_bound_ns(until, "until"), kinds=wanted, limit=limit, codes=patterns,
-        from_seq=from_seq, to_seq=to_seq,
-    )
-
-
-def _strings(value: Iterable[str] | str | None, name: str) -> tuple[str, ...]:
-    """One string or a collection of them as a tuple; anything else is refused by name."""
-    if value is None:
-        return ()
-    if isinstance(value, str):
-        return (value,)
-    if not isinstance(value, list | tuple | set | frozenset) or len(value) > 10_000 or not all(
-            isinstance(item, str) for item in value):
-        raise InvalidInputError(f"{name} must be a list of strings, got "
-                                f"{validation.shown(value)}")
-    return tuple(value)
-
-
-def _check_limit(limit: int | None) -> None:
-    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int)
-                              or not 0 <= limit <= validation.MAX_INTEGER):
-        raise InvalidInputError(f"limit must be a whole number of 0 or more, got "
-                                f"{validation.shown(limit)}")
-
-
-def _seq(value: int, name: str) -> int:
-    if (isinstance(value, bool) or not isinstance(value, int)
-            or not 0 <= value <= validation.MAX_INTEGER):
-        raise InvalidInputError(f"{name} must be a seq number of 0 or more, got "
-                                f"{validation.shown(value)}")
-    return value
-
-
-def _check_seq_range(from_seq: int | None, to_seq: int | None) -> None:
-    for name, value in (("from_seq", from_seq), ("to_seq", to_seq)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
-                                  or not 1 <= value <= validation.MAX_INTEGER):
-            raise InvalidInputError(f"{name} must be a seq number of 1 or more, got {value!r}")
-    if from_seq is not None and to_seq is not None and from_seq > to_seq:
-        raise InvalidInputError(f"from_seq {from_seq} is after to_seq {to_seq}: the range is "
-                                "empty")
-
-
-def _bound_ns(moment: datetime | int | None, name: str) -> int | None:
-    if moment is None:
-        return None
-    if isinstance(moment, datetime):
-        return _aware_ns(moment, name)
-    problem = validation.ns_error(name, moment)
-    if problem:
-        raise InvalidInputError(problem)
-    return moment
-
-
-def _aware_ns(moment: datetime, name: str) -> int:
-    """A datetime argument as nanoseconds; InvalidInputError unless the log can hold it."""
-    problem = validation.time_error(name, moment)
-    if problem:
-        raise InvalidInputError(problem)
-    return to_ns(moment)

@@ -17,8 +17,8 @@ from faultledger.http import medkit
 from faultledger.http.context import Context
 from faultledger.http.heavy import SlotResponse, json_bytes, json_items
 from faultledger.service import times
+from faultledger.service.audit import count_history, export_history, seq_recorded_by
 from faultledger.service.exports import export_row, write_csv, write_jsonl
-from faultledger.service.ledger import count_history, export_history, seq_recorded_by
 from faultledger.service.tokens import Permission, Principal
 from faultledger.store.event_log import StoredRecord
 

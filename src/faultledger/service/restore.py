@@ -1,0 +1,135 @@
+"""Restoring a ledger's state on open (persisted projections plus a replay of the log tail),
+and the replay that ``rebuild``, ``verify`` and ``state_at`` share."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable, Iterator
+
+from sqlalchemy import Connection
+
+from faultledger.domain.events import LogRecord
+from faultledger.domain.policy import Policy
+from faultledger.domain.projector import Projector, Transition
+from faultledger.domain.statistics import StatsFold
+from faultledger.errors import FaultLedgerError
+from faultledger.service.writer import clipped
+from faultledger.store import event_log, projections, stat_tables
+from faultledger.store.database import Database
+
+log = logging.getLogger(__name__)
+
+DAMAGED = "its content is damaged or was edited"
+
+
+class UnreadableRecord(Exception):
+    """A stored record this code cannot decode or apply: a damaged or edited payload (valid
+    records never fail a replay), named by its seq."""
+
+    def __init__(self, seq: int, error: BaseException) -> None:
+        super().__init__(f"record seq {seq} cannot be read back ({clipped(error, 200)})")
+        self.seq = seq
+
+
+def apply_all(projector: Projector, records: Iterable[LogRecord]) -> list[Transition]:
+    """``projector.apply_all`` over consecutive records; a record that cannot be decoded (in
+    the store's read) or applied raises UnreadableRecord with its seq. Database errors
+    (locked, I/O) pass unchanged."""
+    reading = iter(records)
+
+    def checked() -> Iterator[LogRecord]:
+        while True:
+            try:
+                record = next(reading)
+            except StopIteration:
+                return
+            except FaultLedgerError:
+                raise
+            except Exception as error:  # decoding the next record failed
+                raise UnreadableRecord(projector.seq + 1, error) from error
+            yield record
+
+    try:
+        return projector.apply_all(checked())
+    except (UnreadableRecord, FaultLedgerError):
+        raise
+    except Exception as error:  # applying the record projector.seq failed
+        raise UnreadableRecord(projector.seq, error) from error
+
+
+def replay(conn: Connection, upto: int | None = None) -> tuple[Projector, list[Transition]]:
+    """A fresh projector (with statistics) over the log up to ``upto``, and its transitions."""
+    projector = Projector(stats=StatsFold())
+    return projector, apply_all(projector, event_log.read(conn, upto_seq=upto))
+
+
+def stats_of(projector: Projector) -> StatsFold:
+    assert projector.stats is not None, "this projector feeds no statistics"
+    return projector.stats
+
+
+def restore(db: Database) -> tuple[Projector, int, int]:
+    """Persisted projections plus a replay of the records after their checkpoint: the
+    projector, the log's head seq and how many records were replayed."""
+    with db.reading() as conn:
+        checkpoint = projections.load_checkpoint(conn)
+        policy = event_log.policy_at(conn, checkpoint.policy_seq)
+        stats_seq = stat_tables.checkpoint_seq(conn)
+        tracks = stat_tables.load_tracks(conn) if stats_seq == checkpoint.seq else None
+        projector = Projector(
+            projections.load_faults(conn),
+            Policy.model_validate(policy.policy) if policy else None,
+            checkpoint.seq,
+            policy_recorded=policy is not None,
+            policy_seq=checkpoint.policy_seq,
+            stats=StatsFold(tracks),
+        )
+        stored_seq = event_log.head(conn)[0]
+    if tracks is None:
+        projector.stats = catch_up_statistics(db, checkpoint.seq, stats_seq)
+    if stored_seq < checkpoint.seq:
+        log.warning("the log ends at seq %d but the projections include seq %d: records were "
+                    "deleted; writes are refused (run `faultledger verify`)",
+                    stored_seq, checkpoint.seq)
+    replayed = max(0, stored_seq - checkpoint.seq)
+    if replayed:
+        projector = persist_tail(db, projector)
+    return projector, stored_seq, replayed
+
+
+def persist_tail(db: Database, projector: Projector) -> Projector:
+    """Bring lagging projections up to the log (in memory, and on disk when writable)."""
+    try:
+        with db.writing() as conn:
+            projector.stage()
+            found = apply_all(projector, event_log.read(conn, after_seq=projector.seq))
+            projections.save(conn, projector.staged_faults(), found,
+                             projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
+            stat_tables.save(conn, stats_of(projector).take(), projector.seq)
+        projector.commit()
+    except FaultLedgerError as error:
+        projector.rollback()
+        log.warning("projections lag the log and cannot be saved (%s); replaying in memory",
+                    error)
+        with db.reading() as conn:
+            apply_all(projector, event_log.read(conn, after_seq=projector.seq))
+        stats_of(projector).take()
+    return projector
+
+
+def catch_up_statistics(db: Database, upto: int, stats_seq: int) -> StatsFold:
+    """Statistics tables behind the projections (first open after the upgrade that created
+    them): fold the log up to the projections' seq and write them all."""
+    with db.reading() as conn:
+        replayed = Projector(stats=StatsFold())
+        apply_all(replayed, event_log.read(conn, upto_seq=upto))
+    fold = stats_of(replayed)
+    output = fold.take()
+    log.info("statistics include seq %d of %d: computing them from the log", stats_seq, upto)
+    try:
+        with db.writing() as conn:
+            stat_tables.replace_all(conn, output, upto)
+    except FaultLedgerError as error:
+        log.warning("statistics cannot be saved (%s); they are incomplete until a writer "
+                    "opens this database", error)
+    return StatsFold(fold.tracks())
