@@ -1,4 +1,10 @@
-"""Shared fixtures: a ledger on a real SQLite file per test, and a notification recorder.
+"""Shared fixtures: a ledger on a real database per test, and a notification recorder.
+
+The core suite (every test that takes ``db_url`` or ``open_ledger``) runs on SQLite files by
+default and on a real PostgreSQL server with ``--backend postgresql`` (``make test`` runs
+both): one server per session (tests/pg_server.py), one fresh database per test. Tests
+that need a file (tampering with it, filling the disk) use SQLite paths of their own and
+are not collected in the PostgreSQL run.
 
 Every test runs in a working directory of its own (``_isolated_from_the_checkout``): the
 relative defaults (``var/faultledger.db``, ``var/http-tokens.yaml``) of a command or server a
@@ -15,6 +21,7 @@ from pathlib import Path
 import pytest
 
 from faultledger import FaultLedger, Notification, Policy
+from tests import pg_server
 
 ISOLATING_ENV = ("FAULTLEDGER_DB", "FAULTLEDGER_CONFIG")
 """The user's own environment choices, which a test must not inherit."""
@@ -42,10 +49,74 @@ def _isolated_from_the_checkout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
         monkeypatch.delenv(name, raising=False)
 
 
+BACKENDS = ("sqlite", "postgresql")
+BACKEND_FIXTURES = {"db_url", "open_ledger", "fresh_url", "postgres"}
+"""A test that takes one of these runs on the backend chosen by ``--backend``."""
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--backend", choices=BACKENDS, default="sqlite",
+                     help="database of the core suite: sqlite (files) or postgresql (a real "
+                          "PostgreSQL 15 server started for the session)")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "sqlite_only: needs a SQLite file, even in the core "
+                                       "suite")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """With ``--backend postgresql`` only the core suite runs (the rest ran on SQLite)."""
+    if config.getoption("--backend") != "postgresql":
+        return
+    keep: list[pytest.Item] = []
+    drop: list[pytest.Item] = []
+    for item in items:
+        fixtures = set(getattr(item, "fixturenames", ()))
+        core = bool(fixtures & BACKEND_FIXTURES) and item.get_closest_marker("sqlite_only") is None
+        (keep if core else drop).append(item)
+    if drop:
+        config.hook.pytest_deselected(items=drop)
+        items[:] = keep
+
+
+@pytest.fixture(scope="session")
+def backend(request: pytest.FixtureRequest) -> str:
+    return str(request.config.getoption("--backend"))
+
+
+@pytest.fixture(scope="session")
+def postgres_server(backend: str) -> Iterator[pg_server.PostgresServer]:
+    """The session's PostgreSQL server (started on first use, in any run)."""
+    with pg_server.running() as server:
+        yield server
+
+
 @pytest.fixture
-def db_url(tmp_path: Path) -> str:
-    """URL of a fresh SQLite file; every ledger a test opens uses this same file."""
-    return f"sqlite:///{tmp_path / 'faults.db'}"
+def postgres(postgres_server: pg_server.PostgresServer) -> pg_server.PostgresServer:
+    """The session's PostgreSQL server for a test that needs PostgreSQL itself."""
+    return postgres_server
+
+
+@pytest.fixture
+def fresh_url(backend: str, tmp_path: Path, request: pytest.FixtureRequest
+              ) -> Callable[[str], str]:
+    """Factory: fresh_url(name) is the URL of a new empty log on the chosen backend."""
+
+    def _make(name: str = "faults") -> str:
+        if backend == "postgresql":
+            server: pg_server.PostgresServer = request.getfixturevalue("postgres_server")
+            return server.database()
+        return f"sqlite:///{tmp_path / (name + '.db')}"
+
+    return _make
+
+
+@pytest.fixture
+def db_url(fresh_url: Callable[[str], str]) -> str:
+    """URL of a fresh log (a SQLite file, or a PostgreSQL database with ``--backend
+    postgresql``); every ledger a test opens uses this same database."""
+    return fresh_url("faults")
 
 
 @pytest.fixture

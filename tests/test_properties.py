@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
-from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -73,8 +73,9 @@ operations = st.lists(
 _files = itertools.count()
 
 
-def _db(tmp_path: Path) -> str:
-    return f"sqlite:///{tmp_path / f'p{next(_files)}.db'}"
+def _db(fresh_url: Callable[[str], str]) -> str:
+    """A fresh log per example (fixtures are per test, examples are many)."""
+    return fresh_url(f"p{next(_files)}")
 
 
 def _drive(ledger: FaultLedger, op: Report | Clear | Timer, now: datetime) -> None:
@@ -98,9 +99,9 @@ DB_SETTINGS = settings(max_examples=25, deadline=None,
 @DB_SETTINGS
 @given(policy=policies, ops=operations)
 def test_reopening_restores_exactly_the_state_before_closing(
-    tmp_path: Path, policy: Policy, ops: list[Report | Clear | Timer | Reopen]
+    fresh_url: Callable[[str], str], policy: Policy, ops: list[Report | Clear | Timer | Reopen]
 ) -> None:
-    url = _db(tmp_path)
+    url = _db(fresh_url)
     now = T0
     ledger = FaultLedger.open(url, policy=policy, background=False)
     try:
@@ -123,10 +124,10 @@ def test_reopening_restores_exactly_the_state_before_closing(
 @DB_SETTINGS
 @given(policy=policies, ops=operations)
 def test_incremental_projection_equals_full_replay(
-    tmp_path: Path, policy: Policy, ops: list[Report | Clear | Timer | Reopen]
+    fresh_url: Callable[[str], str], policy: Policy, ops: list[Report | Clear | Timer | Reopen]
 ) -> None:
     now = T0
-    with FaultLedger.open(_db(tmp_path), policy=policy, background=False) as ledger:
+    with FaultLedger.open(_db(fresh_url), policy=policy, background=False) as ledger:
         for op in ops:
             if not isinstance(op, Reopen):
                 now += timedelta(seconds=op.seconds)
@@ -143,11 +144,12 @@ def test_incremental_projection_equals_full_replay(
 @DB_SETTINGS
 @given(policy=policies, ops=operations, data=st.data())
 def test_state_at_seq_equals_replay_of_the_first_n_records(
-    tmp_path: Path, policy: Policy, ops: list[Report | Clear | Timer | Reopen], data: st.DataObject
+    fresh_url: Callable[[str], str], policy: Policy,
+    ops: list[Report | Clear | Timer | Reopen], data: st.DataObject
 ) -> None:
     now = T0
     snapshots: dict[int, list[Fault]] = {}
-    with FaultLedger.open(_db(tmp_path), policy=policy, background=False) as ledger:
+    with FaultLedger.open(_db(fresh_url), policy=policy, background=False) as ledger:
         snapshots[ledger.last_seq] = _state(ledger)
         for op in ops:
             if not isinstance(op, Reopen):

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import re
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 from zoneinfo import ZoneInfo
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -225,12 +226,27 @@ def _open(url: str, policy: int) -> FaultLedger:
     return FaultLedger.open(url, policy=POLICIES[policy], background=False)
 
 
+_MAKE_URL: list[Callable[[str], str]] = []
+"""``fresh_url`` under ``--backend postgresql`` (set by the autouse fixture below):
+hypothesis examples are many per test, so each example asks for a fresh database itself."""
+
+
+@pytest.fixture(autouse=True)
+def _backend_urls(backend: str, fresh_url: Callable[[str], str]) -> Iterator[None]:
+    if backend == "postgresql":
+        _MAKE_URL.append(fresh_url)
+    yield
+    if backend == "postgresql":
+        _MAKE_URL.pop()
+
+
 @contextmanager
 def built(ops: Sequence[Op], policy: int, base: datetime) -> Iterator[tuple[FaultLedger, str]]:
-    """A ledger on a fresh SQLite file (one temporary directory per example) holding the log
-    the operations write through the public API, its clock starting at ``base``."""
+    """A ledger on a fresh log (a SQLite file in a temporary directory per example, or a
+    PostgreSQL database) holding the log the operations write through the public API, its
+    clock starting at ``base``."""
     with tempfile.TemporaryDirectory(prefix="faultledger-stats-") as tmp:
-        url = f"sqlite:///{Path(tmp) / 'stats.db'}"
+        url = _MAKE_URL[-1]("stats") if _MAKE_URL else f"sqlite:///{Path(tmp) / 'stats.db'}"
         ledger = _open(url, policy)
         try:
             clock = base
@@ -395,7 +411,8 @@ def assert_same_answers(before: dict[tuple[str, Any, Any], list[StatsRow]],
 
 DB_SETTINGS = settings(max_examples=60, deadline=None,
                        suppress_health_check=[HealthCheck.too_slow,
-                                              HealthCheck.data_too_large])
+                                              HealthCheck.data_too_large,
+                                              HealthCheck.function_scoped_fixture])
 
 
 @DB_SETTINGS

@@ -11,22 +11,14 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import Connection, Engine, create_engine, event, exc
+from sqlalchemy import Connection, Engine, create_engine, exc
 from sqlalchemy.engine import make_url
 
-from faultledger.errors import (
-    DatabaseFullError,
-    DatabaseLockedError,
-    DatabaseReadOnlyError,
-    NotADatabaseError,
-    StoreError,
-    WriteConflictError,
-)
+from faultledger.errors import NotADatabaseError, StoreError
+from faultledger.store.dialects import BUSY_TIMEOUT_MS, DialectRules, rules_for
 
-BUSY_TIMEOUT_MS = 5_000
-JOURNAL_SIZE_LIMIT = 4 * 1024 * 1024
-"""Bytes a WAL file keeps after a checkpoint (SQLite's default auto-checkpoint size): the WAL
-never stays larger than that, so a disk that was full gets its space back."""
+__all__ = ["BUSY_TIMEOUT_MS", "Database", "WriteConnection", "describe", "translate_errors"]
+
 LOW_SPACE_CHECKPOINT_PAGES = 16
 """WAL pages between checkpoints once the disk was full (SQLite's default is 1000, 4 MiB):
 each commit appends whole pages to the WAL, so on a nearly full disk the WAL itself would
@@ -53,8 +45,9 @@ def describe(url: str) -> str:
 class Database:
     """One engine per URL. SQLite runs in WAL mode with synchronous=FULL: a commit is on disk.
 
-    Write transactions begin with ``BEGIN IMMEDIATE`` so two writers never deadlock on a
-    lock upgrade; readers use plain ``BEGIN`` and see a consistent snapshot.
+    Write transactions take the log's write lock first (store/dialects.py: SQLite ``BEGIN
+    IMMEDIATE``, PostgreSQL an advisory lock), so writers never interleave; readers see one
+    consistent snapshot.
     """
 
     def __init__(self, url: str, create: bool = True) -> None:
@@ -74,9 +67,8 @@ class Database:
         except (exc.ArgumentError, exc.NoSuchModuleError) as error:
             raise StoreError(f"invalid database URL {url!r}: {error}") from None
         self.dialect = self.engine.dialect.name
-        if self.dialect == "sqlite":
-            event.listen(self.engine, "connect", _sqlite_connect)
-            event.listen(self.engine, "begin", _sqlite_begin)
+        self.rules: DialectRules = rules_for(self.dialect)
+        self.rules.configure(self.engine)
 
     @contextlib.contextmanager
     def reading(self) -> Iterator[Connection]:
@@ -85,6 +77,7 @@ class Database:
 
     @contextlib.contextmanager
     def writing(self) -> Iterator[Connection]:
+        """One write transaction holding the log's write lock."""
         with translate_errors(self.url), self.engine.connect() as raw:
             conn = raw.execution_options(faultledger_write=True)
             with conn.begin():
@@ -100,19 +93,14 @@ class WriteConnection:
     def __init__(self, db: Database) -> None:
         self._db = db
         self._conn: Connection | None = None
-        self._data_version: int | None = None
+        self._seen: object = None
         self.low_space = False
         """After "disk full": checkpoint every few pages until the disk has room again."""
 
     def others_committed(self, conn: Connection) -> bool:
         """Whether another connection committed since this one last looked (SQLite's
         ``PRAGMA data_version``); always True where the database cannot tell cheaply."""
-        if self._db.dialect != "sqlite":
-            return True
-        driver: Any = conn.connection.driver_connection
-        version = int(driver.execute("PRAGMA data_version").fetchone()[0])
-        changed = version != self._data_version
-        self._data_version = version
+        changed, self._seen = self._db.rules.others_committed(conn, self._seen)
         return changed
 
     @contextlib.contextmanager
@@ -169,7 +157,7 @@ class WriteConnection:
         return not busy
 
     def close(self) -> None:
-        self._data_version = None
+        self._seen = None
         if self._conn is not None:
             with contextlib.suppress(Exception):
                 self._conn.close()
@@ -232,53 +220,28 @@ def _create_private(path: Path) -> None:
                 os.unlink(f"{temporary}{leftover}")
 
 
-def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
-    dbapi_connection.isolation_level = None  # we issue BEGIN ourselves (see _sqlite_begin)
-    cursor = dbapi_connection.cursor()
-    cursor.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
-    with contextlib.suppress(sqlite3.OperationalError):  # a read-only file keeps its mode
-        cursor.execute("PRAGMA journal_mode = WAL")
-    cursor.execute("PRAGMA synchronous = FULL")
-    cursor.execute(f"PRAGMA journal_size_limit = {JOURNAL_SIZE_LIMIT}")
-    # Statistics join a VALUES list of periods to time ranges; with many periods SQLite's
-    # planner would build a throw-away automatic index instead of using ours (50× slower).
-    cursor.execute("PRAGMA automatic_index = OFF")
-    cursor.close()
-
-
-def _sqlite_begin(conn: Connection) -> None:
-    write = conn.get_execution_options().get("faultledger_write", False)
-    driver: Any = conn.connection.driver_connection  # cheaper than exec_driver_sql per batch
-    driver.execute("BEGIN IMMEDIATE" if write else "BEGIN")
-
-
-_MESSAGES: tuple[tuple[str, type[StoreError], str], ...] = (
-    ("file is not a database", NotADatabaseError, "is not a faultledger database (not SQLite)"),
-    ("readonly database", DatabaseReadOnlyError, "is read-only; nothing was written"),
-    ("read-only", DatabaseReadOnlyError, "is read-only; nothing was written"),
-    ("database is locked", DatabaseLockedError,
-     f"is locked by another process (waited {BUSY_TIMEOUT_MS / 1000:.0f} s)"),
-    ("disk is full", DatabaseFullError, "cannot grow: the disk or database is full"),
-    ("unable to open database", StoreError, "cannot be opened (missing directory or no access)"),
-    ("disk i/o error", StoreError, "hit an I/O error on disk"),
-)
-
-
 def classify(url: str, error: BaseException) -> StoreError:
     text = str(getattr(error, "orig", None) or error)
     where = f"database {describe(url)}"
-    if isinstance(error, sqlite3.IntegrityError | exc.IntegrityError):
-        return WriteConflictError(f"{where}: concurrent append ({text})")
-    for needle, kind, message in _MESSAGES:
-        if needle in text.lower():
-            return kind(f"{where} {message}")
-    return StoreError(f"{where}: {text}")
+    rules = rules_for(make_url(url).get_backend_name())
+    return rules.classify(where, text, error) or StoreError(f"{where}: {text}")
 
 
 @contextlib.contextmanager
 def translate_errors(url: str) -> Iterator[None]:
-    """Driver exceptions become StoreError subclasses with a message an operator can act on."""
+    """Driver exceptions become StoreError subclasses with a message an operator can act on.
+
+    The ingest path runs statements on the driver's own cursor (store/fastpath.py), so the
+    driver's exceptions are caught as well as SQLAlchemy's."""
     try:
         yield
-    except (exc.DBAPIError, sqlite3.Error) as error:
-        raise classify(url, error) from None
+    except Exception as error:
+        if isinstance(error, exc.DBAPIError | sqlite3.Error) or _is_driver_error(url, error):
+            raise classify(url, error) from None
+        raise
+
+
+def _is_driver_error(url: str, error: BaseException) -> bool:
+    with contextlib.suppress(Exception):
+        return isinstance(error, rules_for(make_url(url).get_backend_name()).driver_errors())
+    return False

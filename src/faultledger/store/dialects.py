@@ -1,12 +1,197 @@
-"""The few statements that differ between SQLite and PostgreSQL, kept in one place."""
+"""What differs between SQLite and PostgreSQL, one small strategy per dialect.
+
+Every writer of one log serialises on one lock held for its whole transaction, re-reads the
+head of the log under that lock and appends after it; a reader sees one consistent snapshot.
+How each database gives that:
+
+=====================  ==================================  =======================================
+                       SQLite                              PostgreSQL
+=====================  ==================================  =======================================
+write lock             ``BEGIN IMMEDIATE`` (file lock,     ``pg_advisory_xact_lock(WRITE_LOCK)``
+                       busy_timeout 5 s)                   (lock_timeout 5 s), READ COMMITTED
+read snapshot          ``BEGIN`` (WAL snapshot)            REPEATABLE READ
+another writer         ``PRAGMA data_version`` changed     always re-read the head (one index seek)
+committed
+schema upgrade         the write lock                      ``pg_advisory_lock(MIGRATE_LOCK)``
+same seq appended      IntegrityError: write conflict      UniqueViolation: write conflict
+=====================  ==================================  =======================================
+
+A write conflict is never "internal": the writer catches up with the other process's
+records and retries (service/writer.py).
+"""
 
 from __future__ import annotations
 
+import contextlib
+import sqlite3
+from collections.abc import Iterator
 from functools import lru_cache
 from typing import Any
 
-from sqlalchemy import Table
+from sqlalchemy import Connection, Engine, Table, event, exc
 from sqlalchemy.dialects import postgresql, sqlite
+
+from faultledger.errors import (
+    DatabaseFullError,
+    DatabaseLockedError,
+    DatabaseReadOnlyError,
+    NotADatabaseError,
+    StoreError,
+    WriteConflictError,
+)
+
+BUSY_TIMEOUT_MS = 5_000
+"""How long a writer waits for another one's lock before "locked" (both dialects)."""
+JOURNAL_SIZE_LIMIT = 4 * 1024 * 1024
+"""Bytes a WAL file keeps after a checkpoint (SQLite's default auto-checkpoint size): the WAL
+never stays larger than that, so a disk that was full gets its space back."""
+WRITE_LOCK = 0x66_6C_65_64_67_72_77  # "fledgrw": one key per database, so per log
+MIGRATE_LOCK = 0x66_6C_65_64_67_6D_67  # "fledgmg"
+
+_LOCKED = f"is locked by another process (waited {BUSY_TIMEOUT_MS / 1000:.0f} s)"
+
+
+class DialectRules:
+    """The defaults: a database that needs nothing special (never used as such)."""
+
+    name = "generic"
+
+    def configure(self, engine: Engine) -> None:
+        """Hook the engine's connect/begin events."""
+
+    def others_committed(self, conn: Connection, last: object) -> tuple[bool, object]:
+        """(whether another connection committed since ``last``, the new token)."""
+        return True, None
+
+    @contextlib.contextmanager
+    def migration_lock(self, conn: Connection) -> Iterator[None]:
+        """Held while a process checks and upgrades the schema: one process migrates."""
+        yield
+
+    def driver_errors(self) -> tuple[type[BaseException], ...]:
+        return ()
+
+    def classify(self, where: str, text: str, error: BaseException) -> StoreError | None:
+        return None
+
+
+class SQLiteRules(DialectRules):
+    name = "sqlite"
+
+    def configure(self, engine: Engine) -> None:
+        event.listen(engine, "connect", _sqlite_connect)
+        event.listen(engine, "begin", _sqlite_begin)
+
+    def others_committed(self, conn: Connection, last: object) -> tuple[bool, object]:
+        driver: Any = conn.connection.driver_connection
+        version = int(driver.execute("PRAGMA data_version").fetchone()[0])
+        return version != last, version
+
+    def driver_errors(self) -> tuple[type[BaseException], ...]:
+        return (sqlite3.Error,)
+
+    def classify(self, where: str, text: str, error: BaseException) -> StoreError | None:
+        if isinstance(error, sqlite3.IntegrityError | exc.IntegrityError):
+            return WriteConflictError(f"{where}: concurrent append ({text})")
+        for needle, kind, message in _SQLITE_MESSAGES:
+            if needle in text.lower():
+                return kind(f"{where} {message}")
+        return None
+
+
+_SQLITE_MESSAGES: tuple[tuple[str, type[StoreError], str], ...] = (
+    ("file is not a database", NotADatabaseError, "is not a faultledger database (not SQLite)"),
+    ("readonly database", DatabaseReadOnlyError, "is read-only; nothing was written"),
+    ("read-only", DatabaseReadOnlyError, "is read-only; nothing was written"),
+    ("database is locked", DatabaseLockedError, _LOCKED),
+    ("disk is full", DatabaseFullError, "cannot grow: the disk or database is full"),
+    ("unable to open database", StoreError, "cannot be opened (missing directory or no access)"),
+    ("disk i/o error", StoreError, "hit an I/O error on disk"),
+)
+
+
+def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
+    dbapi_connection.isolation_level = None  # we issue BEGIN ourselves (see _sqlite_begin)
+    cursor = dbapi_connection.cursor()
+    cursor.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+    with contextlib.suppress(sqlite3.OperationalError):  # a read-only file keeps its mode
+        cursor.execute("PRAGMA journal_mode = WAL")
+    cursor.execute("PRAGMA synchronous = FULL")
+    cursor.execute(f"PRAGMA journal_size_limit = {JOURNAL_SIZE_LIMIT}")
+    # Statistics join a VALUES list of periods to time ranges; with many periods SQLite's
+    # planner would build a throw-away automatic index instead of using ours (50× slower).
+    cursor.execute("PRAGMA automatic_index = OFF")
+    cursor.close()
+
+
+def _sqlite_begin(conn: Connection) -> None:
+    write = conn.get_execution_options().get("faultledger_write", False)
+    driver: Any = conn.connection.driver_connection  # cheaper than exec_driver_sql per batch
+    driver.execute("BEGIN IMMEDIATE" if write else "BEGIN")
+
+
+class PostgreSQLRules(DialectRules):
+    """PostgreSQL through psycopg 3. Writers stay READ COMMITTED: a REPEATABLE READ snapshot
+    would be taken before the lock is granted and miss the previous writer's records."""
+
+    name = "postgresql"
+
+    def configure(self, engine: Engine) -> None:
+        event.listen(engine, "begin", _postgresql_begin)
+
+    @contextlib.contextmanager
+    def migration_lock(self, conn: Connection) -> Iterator[None]:
+        conn.exec_driver_sql(f"SELECT pg_advisory_lock({MIGRATE_LOCK})")
+        conn.commit()
+        try:
+            yield
+        finally:
+            conn.rollback()
+            conn.exec_driver_sql(f"SELECT pg_advisory_unlock({MIGRATE_LOCK})")
+            conn.commit()
+
+    def driver_errors(self) -> tuple[type[BaseException], ...]:
+        try:
+            import psycopg
+        except ImportError:  # pragma: no cover - the URL check names the missing extra
+            return ()
+        return (psycopg.Error,)
+
+    def classify(self, where: str, text: str, error: BaseException) -> StoreError | None:
+        state = getattr(getattr(error, "orig", None) or error, "sqlstate", None) or ""
+        first_line = text.strip().splitlines()[0] if text.strip() else text
+        if state == "23505":  # unique_violation: another writer appended this seq first
+            return WriteConflictError(f"{where}: concurrent append ({first_line})")
+        if state in ("55P03", "40P01"):  # lock_not_available, deadlock_detected
+            return DatabaseLockedError(f"{where} {_LOCKED}")
+        if state in ("53100",):  # disk_full
+            return DatabaseFullError(f"{where} cannot grow: the disk or database is full")
+        if state == "25006":  # read_only_sql_transaction (a standby, or read-only default)
+            return DatabaseReadOnlyError(f"{where} is read-only; nothing was written")
+        if state == "3D000":
+            return StoreError(f"{where} does not exist (create it: createdb NAME)")
+        if state.startswith("28"):
+            return StoreError(f"{where} refused the login ({first_line})")
+        if "connection" in text.lower() and ("refused" in text.lower()
+                                             or "failed" in text.lower()):
+            return StoreError(f"{where} cannot be reached ({first_line})")
+        return None
+
+
+def _postgresql_begin(conn: Connection) -> None:
+    driver: Any = conn.connection.driver_connection
+    if conn.get_execution_options().get("faultledger_write", False):
+        driver.execute(f"SET LOCAL lock_timeout = {BUSY_TIMEOUT_MS}")
+        driver.execute(f"SELECT pg_advisory_xact_lock({WRITE_LOCK})")
+    else:
+        driver.execute("SET TRANSACTION ISOLATION LEVEL REPEATABLE READ")
+
+
+_RULES: dict[str, DialectRules] = {"sqlite": SQLiteRules(), "postgresql": PostgreSQLRules()}
+
+
+def rules_for(dialect_name: str) -> DialectRules:
+    return _RULES.get(dialect_name, DialectRules())
 
 
 @lru_cache(maxsize=16)

@@ -52,7 +52,11 @@ def checked_revision(db: Database) -> str | None:
 
 
 def ensure_current(db: Database, upgrade: bool = True) -> str:
-    """Bring the schema to head (or refuse, with ``upgrade=False``); returns the head revision."""
+    """Bring the schema to head (or refuse, with ``upgrade=False``); returns the head revision.
+
+    Processes that start together on a new PostgreSQL database take turns (the dialect's
+    migration lock): the first creates the schema, the others find it current.
+    """
     current = checked_revision(db)
     head = head_revision()
     if current == head:
@@ -64,8 +68,9 @@ def ensure_current(db: Database, upgrade: bool = True) -> str:
         )
     config = Config()
     config.set_main_option("script_location", str(migrations_dir()))
-    with translate_errors(db.url), db.engine.connect() as conn:
-        config.attributes["connection"] = conn
-        command.upgrade(config, "head")
+    with translate_errors(db.url), db.engine.connect() as conn, db.rules.migration_lock(conn):
+        if MigrationContext.configure(conn).get_current_revision() != head:
+            config.attributes["connection"] = conn
+            command.upgrade(config, "head")
         conn.commit()
     return head
