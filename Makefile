@@ -6,7 +6,7 @@ ROS_STAMP := $(VENV)/.ros-installed
 STAMP  := $(VENV)/.installed
 DEV_STAMP := $(VENV)/.dev-installed
 
-.PHONY: run test lint typecheck unit ros-tests interfaces setup setup-dev bench venv clean
+.PHONY: run test lint typecheck unit unit-postgresql ros-tests interfaces setup setup-dev bench venv clean
 
 # Every phase prints a line when it starts and when it ends with its elapsed seconds
 # (scripts/timed), and pip shows what it collects: a first run is never silent.
@@ -53,7 +53,7 @@ setup-dev: $(ROS_STAMP)
 run: setup
 	scripts/run-demo
 
-test: setup-dev lint typecheck unit ros-tests
+test: setup-dev lint typecheck unit unit-postgresql ros-tests
 
 lint: $(DEV_STAMP)
 	$(BIN)/ruff check src tests bench interfaces
@@ -63,6 +63,11 @@ typecheck: $(DEV_STAMP)
 
 unit: $(DEV_STAMP)
 	$(BIN)/pytest -q --ignore=tests/ros
+
+# The core suite again on a real PostgreSQL 15 server the tests start themselves (Debian's
+# postgresql package; tests/pg_server.py), one database per test.
+unit-postgresql: $(DEV_STAMP)
+	$(BIN)/pytest -q --ignore=tests/ros --backend postgresql
 
 # ROS processes only ever run inside a private network namespace (or localhost-only DDS).
 ros-tests: setup-dev
