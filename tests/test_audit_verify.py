@@ -25,11 +25,14 @@ from faultledger.errors import InvalidInputError
 from faultledger.service.audit import seq_recorded_by, seqs_recorded_between
 from tests.test_tamper import CLI, build_log, edit_payload, swap_payloads, tamper
 
+LENGTH = 14
+"""build_log's records: identity, policy, 10 reports, a clear, a report."""
+
 
 @pytest.fixture
 def db(tmp_path: Path) -> Path:
     path = tmp_path / "faults.db"
-    assert build_log(path) == 13
+    assert build_log(path) == LENGTH
     return path
 
 
@@ -68,11 +71,11 @@ def renumber_with_inserted_record(db: Path, at: int) -> None:
 
 
 # -- the service API -----------------------------------------------------------------------------
-@pytest.mark.parametrize(("from_seq", "to_seq"), [(1, 13), (1, 1), (5, 9), (13, 13), (6, None),
-                                                  (None, 4)])
+@pytest.mark.parametrize(("from_seq", "to_seq"), [(1, LENGTH), (1, 1), (5, 9), (LENGTH, LENGTH),
+                                                  (6, None), (None, 4)])
 def test_intact_segment_verifies(db: Path, from_seq: int | None, to_seq: int | None) -> None:
     report = verify(db, from_seq, to_seq)
-    first, last = from_seq or 1, to_seq or 13
+    first, last = from_seq or 1, to_seq or LENGTH
     assert report.ok, report.problems
     assert (report.records, report.head_seq, report.first_bad_seq, report.problems) == (
         last - first + 1, last, None, [])
@@ -81,7 +84,8 @@ def test_intact_segment_verifies(db: Path, from_seq: int | None, to_seq: int | N
 
 def test_whole_log_verify_without_arguments_is_unchanged(db: Path) -> None:
     whole = verify(db)
-    assert (whole.ok, whole.records, whole.head_seq, whole.first_bad_seq) == (True, 13, 13, None)
+    assert (whole.ok, whole.records, whole.head_seq, whole.first_bad_seq) == (
+        True, LENGTH, LENGTH, None)
     assert verify(db, 1, None) == whole  # same chain and checkpoint checks, no projections
 
 
@@ -106,16 +110,18 @@ CASES: list[tuple[str, Tampering, tuple[int, int | None], int | None]] = [
      lambda db: tamper(db, ("DELETE FROM events WHERE seq = 11", ())), (5, 9), None),
     ("delete-anchor", lambda db: tamper(db, ("DELETE FROM events WHERE seq = 4", ())), (5, 9), 4),
     ("delete-newest-open-range",
-     lambda db: tamper(db, ("DELETE FROM events WHERE seq = 13", ())), (10, None), 13),
+     lambda db: tamper(db, ("DELETE FROM events WHERE seq = ?", (LENGTH,))), (10, None),
+     LENGTH),
     ("reorder-inside", lambda db: swap_payloads(db, 6, 8), (5, 9), 6),
-    ("reorder-outside", lambda db: swap_payloads(db, 2, 11), (5, 9), None),
+    ("reorder-outside", lambda db: swap_payloads(db, 3, 11), (5, 9), None),  # two reports
     ("insert-inside", lambda db: renumber_with_inserted_record(db, 7), (5, 9), 7),
     ("insert-after-range", lambda db: renumber_with_inserted_record(db, 11), (5, 9), None),
     ("insert-after-head",
-     lambda db: tamper(db, ("INSERT INTO events SELECT 14, 'a1b2c3d4-0000-4000-8000-0000000000aa', "
+     lambda db: tamper(db, ("INSERT INTO events SELECT seq + 1, "
+                            "'a1b2c3d4-0000-4000-8000-0000000000aa', "
                             "kind, fault_code, source_id, payload, occurred_at_ns, "
-                            "recorded_at_ns, schema_version, hash FROM events WHERE seq = 13",
-                            ())), (10, None), 14),
+                            "recorded_at_ns, schema_version, hash FROM events WHERE seq = ?",
+                            (LENGTH,))), (10, None), LENGTH + 1),
 ]
 
 
@@ -139,28 +145,29 @@ def test_segment_verify_finds_tampering_inside_and_only_inside(
 def test_range_past_the_end_of_the_log_fails(db: Path) -> None:
     report = verify(db, 10, 20)
     assert not report.ok
-    assert report.first_bad_seq == 14
-    assert "the log ends at seq 13" in report.problems[0]
-    starts_late = verify(db, 14)
-    assert (starts_late.ok, starts_late.first_bad_seq) == (False, 14)
+    assert report.first_bad_seq == LENGTH + 1
+    assert f"the log ends at seq {LENGTH}" in report.problems[0]
+    starts_late = verify(db, LENGTH + 1)
+    assert (starts_late.ok, starts_late.first_bad_seq) == (False, LENGTH + 1)
 
 
 def test_rewritten_head_with_recomputed_hash_is_caught_by_the_checkpoint(db: Path) -> None:
     with sqlite3.connect(db) as conn:
         conn.row_factory = sqlite3.Row
-        prev = conn.execute("SELECT hash FROM events WHERE seq = 12").fetchone()["hash"]
-        row = conn.execute("SELECT * FROM events WHERE seq = 13").fetchone()
+        prev = conn.execute("SELECT hash FROM events WHERE seq = ?",
+                            (LENGTH - 1,)).fetchone()["hash"]
+        row = conn.execute("SELECT * FROM events WHERE seq = ?", (LENGTH,)).fetchone()
         forged = row["payload"].replace("/robot/base", "/robot/forged")
-        digest = record_hash(prev, 13, row["event_id"], row["kind"], row["fault_code"],
+        digest = record_hash(prev, LENGTH, row["event_id"], row["kind"], row["fault_code"],
                              "/robot/forged", forged, row["occurred_at_ns"],
                              row["recorded_at_ns"], row["schema_version"])
-        conn.execute("UPDATE events SET payload = ?, source_id = ?, hash = ? WHERE seq = 13",
-                     (forged, "/robot/forged", digest))
+        conn.execute("UPDATE events SET payload = ?, source_id = ?, hash = ? WHERE seq = ?",
+                     (forged, "/robot/forged", digest, LENGTH))
     conn.close()
-    report = verify(db, 10, 13)
-    assert (report.ok, report.first_bad_seq) == (False, 13)
+    report = verify(db, 10, LENGTH)
+    assert (report.ok, report.first_bad_seq) == (False, LENGTH)
     assert "differs from the recorded head" in report.problems[0]
-    assert verify(db, 10, 12).ok  # the segment before it is still proven by its own hashes
+    assert verify(db, 10, LENGTH - 1).ok  # the segment before it is still proven by its hashes
 
 
 @pytest.mark.parametrize(("bounds", "words"), [
@@ -215,10 +222,13 @@ def test_cli_verify_segment_ok(db: Path) -> None:
     assert done.stdout.startswith("OK: records 5..9 (5 records)")
     assert hashes[4] in done.stdout and hashes[9] in done.stdout
     code, data = cli_json("verify", "--db", url(db), "--from-seq", "5", "--to-seq", "9")
-    assert code == 0
+    with FaultLedger.open(url(db)) as ledger:
+        identity = ledger.identity
+    assert code == 0 and identity is not None
     assert data == {"ok": True, "records": 5, "head_seq": 9, "head_hash": hashes[9],
                     "first_bad_seq": None, "problems": [], "from_seq": 5, "to_seq": 9,
-                    "anchor_seq": 4, "anchor_hash": hashes[4]}
+                    "anchor_seq": 4, "anchor_hash": hashes[4], "robot_id": identity.robot_id,
+                    "ledger_id": identity.ledger_id}
     code, data = cli_json("verify", "--db", url(db), "--to-seq", "3")
     assert (code, data["anchor_hash"], data["records"]) == (0, GENESIS_HASH, 3)
 
@@ -251,7 +261,7 @@ def test_cli_verify_by_time(tmp_path: Path) -> None:
     (["--from-seq", "3", "--since", "2026-11-21"], "not both"),
     (["--from-seq", "9", "--to-seq", "3"], "--from-seq 9 is after --to-seq 3"),
     (["--until", "yesterday"], "--until must be an ISO 8601 date or time"),
-    (["--since", "2099-01-01T00:00Z"], "no record of the log (seq 1..13) was recorded"),
+    (["--since", "2099-01-01T00:00Z"], f"no record of the log (seq 1..{LENGTH}) was recorded"),
 ])
 def test_cli_verify_bad_input_exits_2(db: Path, args: list[str], words: str) -> None:
     done = run_cli("verify", "--db", url(db), *args)
@@ -289,7 +299,7 @@ def test_cli_state_at_time(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("when", "words"), [
-    ("99", "seq 99 is not in the log (seq 0..13)"),
+    ("99", f"seq 99 is not in the log (seq 0..{LENGTH})"),
     ("soon", "WHEN|SEQ must be a seq number or an ISO 8601 date or time"),
     ("-4", "WHEN|SEQ must be a seq number or an ISO 8601 date or time"),
 ])

@@ -139,14 +139,15 @@ def test_it_changes_no_fault_and_announces_nothing(ledger: FaultLedger) -> None:
 
 
 def test_it_records_no_policy_before_it(tmp_path: Path) -> None:
-    """A goal outcome depends on no debounce policy: the first record of a log may be one,
-    and no policy_changed is written for it (SPEC §3: recorded before a record that needs it)."""
+    """A goal outcome depends on no debounce policy: the first record of a log after its
+    identity may be one, and no policy_changed is written for it (SPEC §3: recorded before a
+    record that needs it)."""
     with FaultLedger.open(url(tmp_path / "faults.db"), background=False) as ledger:
-        assert ledger.record_goal_outcome(NAV, "g1", "ABORTED").seq == 1
-        assert [r.kind for r in ledger.history()] == ["goal_outcome"]
+        assert ledger.record_goal_outcome(NAV, "g1", "ABORTED").seq == 2
+        assert [r.kind for r in ledger.history()] == ["ledger_identified", "goal_outcome"]
         assert ledger.report("X", "FAILED", 1, "", "/x").accepted
-        assert [r.kind for r in ledger.history()] == ["goal_outcome", "policy_changed",
-                                                      "fault_reported"]
+        assert [r.kind for r in ledger.history()] == ["ledger_identified", "goal_outcome",
+                                                      "policy_changed", "fault_reported"]
 
 
 def test_code_and_source_filters_treat_it_as_a_record_without_code(

@@ -159,7 +159,7 @@ def test_a_server_records_its_policy_and_a_reader_sees_it(tmp_path: Path) -> Non
         server.report("A", "FAILED", 1, "", "/x")
     with bootstrap.open_ledger(bootstrap.resolve(Settings(), Role.READER, db=db)) as reader:
         assert reader.policy == policy
-        assert reader.last_seq == 2
+        assert reader.last_seq == 3  # the log's identity, the policy, the report
 
 
 # -- the package exports what callers need -----------------------------------------------------

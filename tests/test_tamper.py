@@ -25,7 +25,8 @@ CLI = [sys.executable, "-m", "faultledger.cli.main"]
 
 
 def build_log(db: Path) -> int:
-    """A small log through the API (policy record, reports over 3 codes, a clear); its length."""
+    """A small log through the API (identity and policy records, reports over 3 codes, a
+    clear); its length."""
     policy = Policy(confirmation_threshold=-2, healing_enabled=True, healing_threshold=2)
     with FaultLedger.open(f"sqlite:///{db}", policy=policy, background=False) as ledger:
         steps = [
@@ -44,7 +45,7 @@ def build_log(db: Path) -> int:
         ledger.report("MOTOR_OVERHEAT", "PASSED", source_id="/robot/base",
                       at=T0 + timedelta(seconds=20))
         length = ledger.last_seq
-    assert length == 13  # policy_changed + 10 reports + clear + 1 report
+    assert length == 14  # ledger_identified + policy_changed + 10 reports + clear + 1 report
     return length
 
 
@@ -119,7 +120,7 @@ CASES: list[tuple[str, Tampering, Callable[[int], int], str]] = [
          "INSERT INTO events SELECT seq + 1, 'a1b2c3d4-0000-4000-8000-000000000000', kind, "
          "fault_code, source_id, payload, occurred_at_ns, recorded_at_ns, schema_version, hash "
          "FROM events WHERE seq = ?", (n,))),
-     lambda n: n + 1, "record 14"),
+     lambda n: n + 1, "record 15"),
 ]
 CASE_IDS = [c[0] for c in CASES]
 # The CLI is checked on the five kinds of tampering an auditor would try first.

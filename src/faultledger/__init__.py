@@ -7,6 +7,7 @@ its methods take and return, and every exception it may raise (all are ``FaultLe
 
 from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy, SourceOverride
 from faultledger.domain.projector import Transition
@@ -20,6 +21,7 @@ from faultledger.errors import (
     DatabaseLockedError,
     DatabaseReadOnlyError,
     FaultLedgerError,
+    IdentityMismatchError,
     InternalError,
     InvalidInputError,
     LedgerClosedError,
@@ -57,9 +59,11 @@ __all__ = [
     "FaultLookup",
     "FaultStatus",
     "GoalOutcomeRequest",
+    "IdentityMismatchError",
     "InternalError",
     "InvalidInputError",
     "LedgerClosedError",
+    "LedgerIdentity",
     "LogRecord",
     "NotADatabaseError",
     "Notification",

@@ -79,6 +79,11 @@ class SchemaOutdatedError(StoreError):
     pass
 
 
+class IdentityMismatchError(FaultLedgerError):
+    """The log records another robot_id than the one this process was told it is; nothing
+    was written."""
+
+
 class LedgerClosedError(FaultLedgerError):
     reason = Reason.UNAVAILABLE
 

@@ -38,6 +38,7 @@ from faultledger.cli.safe_text import cell
 from faultledger.domain.clock import from_ns, iso_ns, to_ns
 from faultledger.domain.events import KINDS
 from faultledger.domain.fault import Fault
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.integrity import GENESIS_HASH
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.errors import FaultLedgerError
@@ -140,7 +141,7 @@ def history(
             return
         rows = export_history(ledger, **filters)
         writer = write_csv if chosen is Format.csv else write_jsonl
-        count = _export(rows, writer, output, force)
+        count = _export(rows, writer, ledger.identity, output, force)
     if output is not None:
         render.console(stderr=True).print(cell(f"wrote {count} records to {output}"))
 
@@ -203,7 +204,9 @@ def verify(
         data: dict[str, Any] = {
             "ok": report_.ok, "records": report_.records, "head_seq": report_.head_seq,
             "head_hash": report_.head_hash, "first_bad_seq": report_.first_bad_seq,
-            "problems": report_.problems}
+            "problems": report_.problems,
+            "robot_id": None if report_.identity is None else report_.identity.robot_id,
+            "ledger_id": None if report_.identity is None else report_.identity.ledger_id}
         if ranged:
             data.update({"from_seq": first, "to_seq": end, "anchor_seq": first - 1,
                          "anchor_hash": anchor})
@@ -228,6 +231,8 @@ def verify(
             render.complain("FAILED:", problem)
         if report_.first_bad_seq is not None:
             typer.echo(f"first bad seq: {report_.first_bad_seq}")
+    if not as_json:
+        render.say(_identity_line(report_.identity))
     if report_.ok and not as_json:
         for m in matched:
             render.say(f"anchor {m.path}: seq {m.anchor.seq} hash {m.anchor.hash} "
@@ -327,13 +332,13 @@ def log_prefix(ledger: FaultLedger, moment: datetime | int, calendar: ShiftCalen
 
 # -- export ----------------------------------------------------------------------------------
 
-def _export(rows: Iterator[StoredRecord], write: Writer, output: Path | None,
-            force: bool = False) -> int:
+def _export(rows: Iterator[StoredRecord], write: Writer, identity: LedgerIdentity | None,
+            output: Path | None, force: bool = False) -> int:
     """Stream rows out. A file appears only once complete (cli/output_files.py: a temporary
     file of its own beside it, then renamed; an existing one only replaced with ``force``)."""
     if output is None:
         try:
-            count = write(rows, sys.stdout)
+            count = write(rows, sys.stdout, identity)
             sys.stdout.flush()
         except BrokenPipeError:  # `| head`: the reader left; say nothing more
             devnull = os.open(os.devnull, os.O_WRONLY)
@@ -342,7 +347,7 @@ def _export(rows: Iterator[StoredRecord], write: Writer, output: Path | None,
         return count
     try:
         with open_text_output(output, force) as out:
-            count = write(rows, out)
+            count = write(rows, out, identity)
     except OutputFileError as error:
         _fail(str(error))
     return count
@@ -389,6 +394,13 @@ def _anchor_inputs(files: list[Path] | None, public_key: Path | None, config: Pa
         return paths, None if key_path is None else load_public_key(key_path)
     except FaultLedgerError as error:
         _fail(str(error))
+
+
+def _identity_line(identity: LedgerIdentity | None) -> str:
+    """Whose log was verified: what the log records, not what this machine is configured as."""
+    if identity is None:
+        return "robot_id and ledger_id: none recorded yet (the next writer records them)"
+    return f"robot_id {identity.robot_id}, ledger_id {identity.ledger_id}"
 
 
 def _stored_hash(ledger: FaultLedger, seq: int) -> str | None:

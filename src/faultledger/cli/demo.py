@@ -45,7 +45,7 @@ def dated_steps(now: datetime) -> list[datetime]:
 
 
 def run_demo(url: str, out: Console, calendar: ShiftCalendar, width: int | None,
-             scratch: Path | None = None) -> None:
+             scratch: Path | None = None, robot_id: str | None = None) -> None:
     out.print(Text.assemble(("faultledger demo", "bold"), " on ",
                             printable(render.describe_url(url))), soft_wrap=True)
     if scratch is not None:
@@ -56,7 +56,8 @@ def run_demo(url: str, out: Console, calendar: ShiftCalendar, width: int | None,
     else:
         out.print(cell("the database given with --db: the demo's records are added to it"))
     out.print("policy: confirm after 3 FAILED (counter -3), heal after the counter reaches +3\n")
-    with FaultLedger.open(url, policy=DEMO_POLICY, background=False) as ledger:
+    with FaultLedger.open(url, policy=DEMO_POLICY, background=False,
+                          robot_id=robot_id) as ledger:
         start = ledger.last_seq
         announced: list[Notification] = []
         ledger.subscribe(announced.append)

@@ -383,7 +383,8 @@ def demo(
     scratch, url = (None, db) if db else scratch_database()
     setup = prepare(url, config, Role.WRITER, shifts=shifts)
     out = render.console(wide=wide)
-    run_demo(setup.url, out, setup.calendar, render.fit_width(out, wide), scratch)
+    run_demo(setup.url, out, setup.calendar, render.fit_width(out, wide), scratch,
+             setup.robot_id)
 
 
 def _user() -> str:

@@ -328,6 +328,8 @@ def summary(record: LogRecord) -> str:
         return f"PREFAILED for {p['after_sec']} s"
     if record.kind == "goal_outcome":
         return f"goal {p['goal_id']} of {p['action']}: {p['status']}"
+    if record.kind == "ledger_identified":
+        return f"robot {p['robot_id']}, ledger {p['ledger_id']}"
     return str(p.get("reason", ""))
 
 

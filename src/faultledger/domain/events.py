@@ -23,6 +23,7 @@ FAULT_CONFIRMED_BY_TIMER = "fault_confirmed_by_timer"
 POLICY_CHANGED = "policy_changed"
 RECLASSIFIED_ON_STARTUP = "reclassified_on_startup"
 GOAL_OUTCOME = "goal_outcome"
+LEDGER_IDENTIFIED = "ledger_identified"
 
 GOAL_STATUSES = ("SUCCEEDED", "ABORTED", "CANCELED")
 """Terminal statuses of an action goal a goal outcome record can carry."""
@@ -133,9 +134,25 @@ class GoalOutcome(NamedTuple):
                 "server_node": self.server_node}
 
 
+class LedgerIdentified(NamedTuple):
+    """Which robot's log this is (``robot_id``) and which log (``ledger_id``, a UUID made
+    with it): written once, by the first writer, before its first other record. A fleet's
+    central keeps one hash chain per ledger_id; later copies never change it."""
+
+    robot_id: str
+    ledger_id: str
+
+    @property
+    def kind(self) -> str:
+        return LEDGER_IDENTIFIED
+
+    def payload(self) -> dict[str, Any]:
+        return {"robot_id": self.robot_id, "ledger_id": self.ledger_id}
+
+
 DomainEvent = (
     FaultReported | FaultCleared | FaultConfirmedByTimer | PolicyChanged | ReclassifiedOnStartup
-    | GoalOutcome
+    | GoalOutcome | LedgerIdentified
 )
 KINDS = (
     FAULT_REPORTED,
@@ -144,13 +161,15 @@ KINDS = (
     POLICY_CHANGED,
     RECLASSIFIED_ON_STARTUP,
     GOAL_OUTCOME,
+    LEDGER_IDENTIFIED,
 )
 
 
 def fault_code_of(event: DomainEvent) -> str | None:
-    """The fault a record concerns; None for a policy change and a goal outcome (stored as
-    NULL, so no code filter ever matches them)."""
-    return None if isinstance(event, PolicyChanged | GoalOutcome) else event.fault_code
+    """The fault a record concerns; None for a policy change, a goal outcome and the log's
+    identity (stored as NULL, so no code filter ever matches them)."""
+    return (None if isinstance(event, PolicyChanged | GoalOutcome | LedgerIdentified)
+            else event.fault_code)
 
 
 def source_of(event: DomainEvent) -> str | None:
@@ -181,6 +200,7 @@ _DECODERS: dict[str, Callable[[Mapping[str, Any]], DomainEvent]] = {
     RECLASSIFIED_ON_STARTUP: lambda p: ReclassifiedOnStartup(p["fault_code"], p["reason"]),
     GOAL_OUTCOME: lambda p: GoalOutcome(p["action"], p["goal_id"], p["status"],
                                         p["server_node"]),
+    LEDGER_IDENTIFIED: lambda p: LedgerIdentified(p["robot_id"], p["ledger_id"]),
 }
 
 Upcaster = Callable[[dict[str, Any]], dict[str, Any]]

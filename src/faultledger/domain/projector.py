@@ -12,11 +12,13 @@ from faultledger.domain.events import (
     FaultConfirmedByTimer,
     FaultReported,
     GoalOutcome,
+    LedgerIdentified,
     LogRecord,
     PolicyChanged,
     ReclassifiedOnStartup,
 )
 from faultledger.domain.fault import Fault
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.notifications import for_status_change
 from faultledger.domain.policy import Policy
 from faultledger.domain.statistics import StatsFold
@@ -52,12 +54,14 @@ class Projector:
         policy_recorded: bool = False,
         policy_seq: int = 0,
         stats: StatsFold | None = None,
+        identity: LedgerIdentity | None = None,
+        identity_seq: int = 0,
     ) -> None:
         self.stats = stats
         """The statistics fold, when this projector feeds the persisted projections."""
         self._faults: dict[str, Fault] = dict(faults or {})
         self._staged: dict[str, Fault] | None = None
-        self._saved: tuple[Policy, int, bool, int] | None = None
+        self._saved: tuple[Policy, int, bool, int, LedgerIdentity | None, int, int] | None = None
         self.policy = policy or Policy()
         self.policy_recorded = policy_recorded
         self.policy_seq = policy_seq
@@ -65,6 +69,15 @@ class Projector:
         self.committed_seq = seq
         """``seq`` as readers may see it: staged records are not included until ``commit``,
         which sets it after the faults, so a reader that sees a seq sees its faults."""
+        self.identity = identity
+        """The log's identity: its first ``ledger_identified`` record (None before one)."""
+        self.identity_seq = identity_seq
+        """The seq of that record (0: none yet)."""
+        self.committed_identity = identity
+        """``identity`` as readers may see it (like ``committed_seq``)."""
+        self.ignored_identities: list[int] = []
+        """Seqs of later ``ledger_identified`` records: no writer writes one, so ``verify``
+        names them; the first one stays the log's identity."""
 
     # -- reading -----------------------------------------------------------------------------
     def get(self, fault_code: str) -> Fault | None:
@@ -107,7 +120,8 @@ class Projector:
         if self.stats is not None:
             self.stats.stage()
         self._staged = {}
-        self._saved = (self.policy, self.seq, self.policy_recorded, self.policy_seq)
+        self._saved = (self.policy, self.seq, self.policy_recorded, self.policy_seq,
+                       self.identity, self.identity_seq, len(self.ignored_identities))
 
     def staged_faults(self) -> list[Fault]:
         return list((self._staged or {}).values())
@@ -119,13 +133,16 @@ class Projector:
             self._faults.update(self._staged)
         self._staged = None
         self._saved = None
+        self.committed_identity = self.identity
         self.committed_seq = self.seq
 
     def rollback(self) -> None:
         if self.stats is not None:
             self.stats.rollback()
         if self._saved is not None:
-            self.policy, self.seq, self.policy_recorded, self.policy_seq = self._saved
+            (self.policy, self.seq, self.policy_recorded, self.policy_seq, self.identity,
+             self.identity_seq, ignored) = self._saved
+            del self.ignored_identities[ignored:]
         self._staged = None
         self._saved = None
 
@@ -156,7 +173,7 @@ class Projector:
         if self.stats is not None:
             if isinstance(event, GoalOutcome):
                 self.stats.observe_goal(record, event)
-            elif not isinstance(event, PolicyChanged):
+            elif not isinstance(event, PolicyChanged | LedgerIdentified):
                 fault = effect.fault or self.get(event.fault_code)
                 self.stats.observe(record, effect.transition, fault)
         return effect
@@ -182,7 +199,19 @@ class Projector:
             self.policy = Policy.model_validate(event.policy)
             self.policy_recorded = True
             self.policy_seq = record.seq
+        elif isinstance(event, LedgerIdentified):
+            self._identified(record, event)
         return _NOTHING
+
+    def _identified(self, record: LogRecord, event: LedgerIdentified) -> None:
+        """The first identity is the log's; it changes no fault and announces nothing."""
+        if self.identity is not None:
+            self.ignored_identities.append(record.seq)
+            return
+        self.identity = LedgerIdentity(event.robot_id, event.ledger_id)
+        self.identity_seq = record.seq
+        if self._saved is None:
+            self.committed_identity = self.identity
 
     def _reported(self, record: LogRecord, event: FaultReported) -> Effect:
         old = self.get(event.fault_code)

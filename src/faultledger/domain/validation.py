@@ -19,6 +19,10 @@ MIN_INTEGER, MAX_INTEGER = -(2**63), 2**63 - 1
 """What an integer field may hold: a signed 64-bit column in every database we support."""
 
 _INVALID_CHAR = re.compile(r"[^A-Za-z0-9_.\-]")
+MAX_ROBOT_ID_LENGTH = 128
+ROBOT_ID_RULE = (f"1..{MAX_ROBOT_ID_LENGTH} characters: ASCII letters, digits, _ . -, starting "
+                 "with a letter or digit")
+_ROBOT_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]*")
 
 
 def shown(value: object, limit: int = 60) -> str:
@@ -181,3 +185,13 @@ def goal_outcome_error(action: object, goal_id: object, status: object,
     if not isinstance(status, str) or status not in GOAL_STATUSES:
         return f"status must be SUCCEEDED, ABORTED or CANCELED, got {shown(status)}"
     return text_error("server_node", server_node, MAX_SERVER_NODE_LENGTH)  # type: ignore[arg-type]
+
+
+def robot_id_error(robot_id: object) -> str | None:
+    """A robot_id names the robot in URLs, file names and a central's tokens: plain ASCII."""
+    if not isinstance(robot_id, str):
+        return f"robot_id must be a string, got {type(robot_id).__name__}"
+    if (not 0 < len(robot_id) <= MAX_ROBOT_ID_LENGTH
+            or _ROBOT_ID.fullmatch(robot_id) is None):
+        return f"robot_id must be {ROBOT_ID_RULE}; got {shown(robot_id)}"
+    return None

@@ -25,7 +25,7 @@ import re
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -363,8 +363,8 @@ def with_anchors(report: VerifyReport, anchors: AnchorReport) -> VerifyReport:
         return report
     firsts = [s for s in (report.first_bad_seq, anchors.first_bad_seq) if s is not None]
     problems = [*report.problems, *(p for p in anchors.problems if p not in report.problems)]
-    return VerifyReport(False, report.records, report.head_seq, report.head_hash,
-                        min(firsts) if firsts else None, problems)
+    return replace(report, ok=False, first_bad_seq=min(firsts) if firsts else None,
+                   problems=problems)
 
 
 # -- periodic anchors (`faultledger serve`) ------------------------------------------------------

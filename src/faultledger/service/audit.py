@@ -10,7 +10,9 @@ from typing import TYPE_CHECKING
 
 from sqlalchemy import Connection
 
-from faultledger.errors import InvalidInputError
+from faultledger.domain.identity import LedgerIdentity
+from faultledger.domain.projector import Projector
+from faultledger.errors import FaultLedgerError, InvalidInputError
 from faultledger.service.arguments import (
     aware_ns,
     check_seq_range,
@@ -100,10 +102,18 @@ def seqs_recorded_between(ledger: FaultLedger, since: datetime | None,
 def verify(db: Database, from_seq: int | None = None, to_seq: int | None = None
            ) -> VerifyReport:
     """``FaultLedger.verify``: the whole log (with the database's integrity check and a replay
-    of the projections), or one segment of the chain."""
+    of the projections), or one segment of the chain; with the log's identity as its
+    projection records it (a whole-log check compares that with a replay)."""
     if from_seq is not None or to_seq is not None:
-        return _verify_segment(db, 1 if from_seq is None else from_seq, to_seq)
-    return _with_storage_damage(db, lambda: _verify_log(db))
+        report = _verify_segment(db, 1 if from_seq is None else from_seq, to_seq)
+    else:
+        report = _with_storage_damage(db, lambda: _verify_log(db))
+    try:
+        with db.reading() as conn:
+            found = projections.load_identity(conn)
+    except FaultLedgerError:
+        return report  # the storage problem is the report already
+    return report if found is None else replace(report, identity=found[0])
 
 
 def _verify_log(db: Database) -> VerifyReport:
@@ -199,4 +209,25 @@ def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -
     if checkpoint.policy_seq != expected.policy_seq:
         problems.append(f"checkpoint names record {checkpoint.policy_seq} as the policy in force, "
                         f"a replay finds {expected.policy_seq}")
+    problems.extend(_identity_problems(conn, expected))
+    return problems
+
+
+def _identity_problems(conn: Connection, expected: Projector) -> list[str]:
+    """The identity projection against a replay; and any later ``ledger_identified`` record,
+    which no writer writes (the first one stays the identity, the others are ignored)."""
+    stored = projections.load_identity(conn)
+    replayed = (None if expected.identity is None
+                else (expected.identity, expected.identity_seq))
+    problems = []
+    if stored != replayed:
+        def shown(found: tuple[LedgerIdentity, int] | None) -> str:
+            return "none" if found is None else (
+                f"robot_id {found[0].robot_id!r}, ledger_id {found[0].ledger_id} "
+                f"(record {found[1]})")
+        problems.append(f"the recorded identity ({shown(stored)}) differs from a full replay "
+                        f"of the log ({shown(replayed)})")
+    problems.extend(f"record {seq} is a second ledger_identified record (the log's identity "
+                    f"is record {expected.identity_seq}): no writer writes one; it is ignored"
+                    for seq in expected.ignored_identities)
     return problems

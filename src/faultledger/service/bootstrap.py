@@ -8,6 +8,8 @@ Precedence, for every entry point alike (docs/configuration.md, "Precedence"):
   command that only reads never records a policy (the log's own applies).
 - shift calendar: ``--shifts`` > the config file's ``shifts`` > the built-in UTC calendar.
 - e-stop codes: the config file's ``estop_codes`` > ``HW_*_EMERGENCY_STOP``.
+- robot_id: the config file's ``robot_id`` > the host name (for a log without identity); a
+  command that only reads opens any robot's log (it records nothing).
 """
 
 from __future__ import annotations
@@ -58,6 +60,8 @@ class LedgerConfig:
     max_batch: int
     role: Role
     estop_codes: tuple[str, ...] = DEFAULT_ESTOP_CODES
+    robot_id: str | None = None
+    """Configured explicitly: a writer refuses a log that records another robot_id."""
 
 
 def database_url(text: str) -> str:
@@ -125,13 +129,18 @@ def resolve(settings: Settings, role: Role, *, db: str | None = None,
     path = shifts or settings.shifts
     calendar = default_calendar() if path is None else load_shift_calendar(path)
     return LedgerConfig(url, chosen, calendar, settings.database.max_batch, role,
-                        tuple(settings.estop_codes))
+                        tuple(settings.estop_codes), settings.robot_id)
 
 
 def open_ledger(config: LedgerConfig) -> FaultLedger:
-    """Open the ledger an entry point asked for; errors are FaultLedgerError subclasses."""
+    """Open the ledger an entry point asked for; errors are FaultLedgerError subclasses.
+
+    A reader opens without the configured robot_id: it records nothing, so it may read a log
+    copied from another robot (verify, history) on a robot that has one configured.
+    """
     writes = config.role is not Role.READER
     return FaultLedger.open(config.url, policy=config.policy, max_batch=config.max_batch,
                             create=writes, upgrade=writes,
                             background=config.role is Role.SERVER, calendar=config.calendar,
-                            estop_codes=config.estop_codes)
+                            estop_codes=config.estop_codes,
+                            robot_id=config.robot_id if writes else None)

@@ -9,6 +9,7 @@ from typing import Annotated, Any, Literal, TypeVar
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from faultledger.domain import validation
 from faultledger.domain.policy import Policy
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES
@@ -134,6 +135,9 @@ class HttpSettings(BaseModel):
 class Settings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
+    robot_id: str | None = None
+    """The robot a log this process writes records as its own (docs/configuration.md,
+    "Robot identity"); None: the host name for a new identity, any recorded one is used."""
     database: DatabaseSettings = Field(default_factory=DatabaseSettings)
     policy: Policy = Field(default_factory=Policy)
     bridges: dict[str, dict[str, Any]] = Field(default_factory=dict)
@@ -149,6 +153,14 @@ class Settings(BaseModel):
     the ``estops`` figure every statistics row, report and the dashboard headline."""
     anchors: AnchorSettings = Field(default_factory=AnchorSettings)
     http: HttpSettings = Field(default_factory=HttpSettings)
+
+    @field_validator("robot_id")
+    @classmethod
+    def _robot_id(cls, value: str | None) -> str | None:
+        problem = None if value is None else validation.robot_id_error(value)
+        if problem is not None:
+            raise ValueError(problem)
+        return value
 
 
 def config_path(given: Path | None) -> Path | None:

@@ -1,6 +1,7 @@
 """The audit export formats (CSV, JSON Lines), shared by `faultledger history` and
 ``GET /api/v1/history``: every stored column and hash, so the chain can be recomputed from an
-export alone (docs/operations.md, "Export formats")."""
+export alone, and the log's identity on every record, so a row names its robot and log
+wherever it ends up (docs/operations.md, "Export formats")."""
 
 from __future__ import annotations
 
@@ -12,17 +13,21 @@ from dataclasses import fields
 from typing import Any, TextIO
 
 from faultledger.domain.clock import iso_ns
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.stat_rows import StatsRow
 from faultledger.store.event_log import StoredRecord
 
 EXPORT_COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "occurred_at",
                   "occurred_at_ns", "recorded_at", "recorded_at_ns", "schema_version",
-                  "payload", "prev_hash", "hash")
+                  "payload", "prev_hash", "hash", "robot_id", "ledger_id")
 """Export columns, in order (docs/operations.md, "Export formats")."""
 
 
-def export_row(record: StoredRecord) -> dict[str, Any]:
-    """One record as an export object; ``payload`` is the stored canonical JSON, parsed."""
+def export_row(record: StoredRecord, identity: LedgerIdentity | None = None
+               ) -> dict[str, Any]:
+    """One record as an export object; ``payload`` is the stored canonical JSON, parsed.
+    ``robot_id``/``ledger_id`` are the log's (None before it records an identity): not
+    stored in the row, so not covered by its hash."""
     return {
         "seq": record.seq,
         "event_id": record.event_id,
@@ -37,30 +42,35 @@ def export_row(record: StoredRecord) -> dict[str, Any]:
         "payload": json.loads(record.payload_json),
         "prev_hash": record.prev_hash,
         "hash": record.hash,
+        "robot_id": None if identity is None else identity.robot_id,
+        "ledger_id": None if identity is None else identity.ledger_id,
     }
 
 
-Writer = Callable[[Iterable[StoredRecord], TextIO], int]
+Writer = Callable[[Iterable[StoredRecord], TextIO, LedgerIdentity | None], int]
 
 
-def write_jsonl(rows: Iterable[StoredRecord], out: TextIO) -> int:
+def write_jsonl(rows: Iterable[StoredRecord], out: TextIO,
+                identity: LedgerIdentity | None = None) -> int:
     count = 0
     for record in rows:
-        out.write(json.dumps(export_row(record), ensure_ascii=False) + "\n")
+        out.write(json.dumps(export_row(record, identity), ensure_ascii=False) + "\n")
         count += 1
     return count
 
 
-def write_csv(rows: Iterable[StoredRecord], out: TextIO) -> int:
+def write_csv(rows: Iterable[StoredRecord], out: TextIO,
+              identity: LedgerIdentity | None = None) -> int:
     """CSV with a header; NULL is an empty cell; payload is the stored canonical JSON text."""
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(EXPORT_COLUMNS)
+    robot_id, ledger_id = identity or ("", "")
     count = 0
     for r in rows:
         writer.writerow([r.seq, r.event_id, r.kind, r.fault_code or "", r.source_id or "",
                          iso_ns(r.occurred_at_ns), r.occurred_at_ns, iso_ns(r.recorded_at_ns),
                          r.recorded_at_ns, r.schema_version, r.payload_json,
-                         r.prev_hash or "", r.hash])
+                         r.prev_hash or "", r.hash, robot_id, ledger_id])
         count += 1
     return count
 

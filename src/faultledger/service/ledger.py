@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import re
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -16,6 +18,7 @@ from faultledger.domain import queries, validation
 from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.events import FaultCleared, LogRecord
 from faultledger.domain.fault import Fault
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.notifications import Notification
 from faultledger.domain.periods import default_calendar
 from faultledger.domain.policy import Policy
@@ -59,6 +62,7 @@ from faultledger.service.writer import (
     RecordPolicy,
     Writer,
     clipped,
+    identity_mismatch,
 )
 from faultledger.store import event_log, migrate, projections, stat_tables
 from faultledger.store.database import Database, describe
@@ -92,11 +96,13 @@ class FaultLedger:
     """Event-sourced fault manager over one database. Thread-safe; use ``open`` to create."""
 
     def __init__(self, db: Database, projector: Projector, policy: Policy | None,
-                 max_batch: int, restored: Restored) -> None:
+                 max_batch: int, restored: Restored, robot_id: str | None = None) -> None:
         self._db = db
         self._subscriptions: list[Subscription] = []
         self._subscriptions_lock = threading.Lock()
-        self._writer = Writer(db, projector, policy, self._announce, max_batch)
+        self._writer = Writer(db, projector, policy, self._announce, max_batch,
+                              robot_id=robot_id or default_robot_id(),
+                              expected_robot_id=robot_id)
         self.restored = restored
         self.calendar: ShiftCalendar = default_calendar()
         """The shift calendar ``stats`` uses unless a call names another."""
@@ -110,18 +116,31 @@ class FaultLedger:
     def open(cls, url: str, policy: Policy | None = None, *, max_batch: int = 512,
              upgrade: bool = True, create: bool = True, background: bool | None = None,
              calendar: ShiftCalendar | None = None,
-             estop_codes: Sequence[str] | None = None) -> FaultLedger:
+             estop_codes: Sequence[str] | None = None,
+             robot_id: str | None = None) -> FaultLedger:
         """Open (create, migrate) the database and restore state: projections + log tail.
 
         With a ``policy`` this process is a serving writer: the policy is recorded when it
         differs from the log's, HEALED faults it cannot heal become CLEARED, and a background
         thread runs time-based confirmation. Without one, the log's own policy applies and
         opening writes nothing (unless ``upgrade`` has a migration to run).
+
+        ``robot_id`` is recorded in the log's identity by its first write (default: the host
+        name). Given, a log that records another robot_id is refused
+        (IdentityMismatchError); not given, a log's recorded identity is used as it is (a
+        copy read elsewhere opens).
         """
+        if robot_id is not None:
+            problem = validation.robot_id_error(robot_id)
+            if problem is not None:
+                raise InvalidInputError(problem)
         db = Database(url, create=create)
         try:
             migrate.ensure_current(db, upgrade=upgrade)
             projector, events, replayed = restore(db)
+            recorded = projector.identity
+            if robot_id is not None and recorded is not None and recorded.robot_id != robot_id:
+                raise identity_mismatch(url, recorded, robot_id)
         except FaultLedgerError:
             db.dispose()
             raise
@@ -135,7 +154,7 @@ class FaultLedger:
             db.dispose()
             raise
         restored = Restored(events, len(projector.committed()), replayed)
-        ledger = cls(db, projector, policy, max_batch, restored)
+        ledger = cls(db, projector, policy, max_batch, restored, robot_id)
         if calendar is not None:
             ledger.calendar = calendar
         if estop_codes is not None:
@@ -178,6 +197,24 @@ class FaultLedger:
     def telemetry(self) -> Snapshot:
         """What this process's writer appended, and its commit latencies (for metrics)."""
         return self._writer.telemetry.snapshot()
+
+    @property
+    def identity(self) -> LedgerIdentity | None:
+        """The log's robot_id and ledger_id, as its first ``ledger_identified`` record says;
+        None before any writer recorded one.
+
+        Until this process sees one, the database is asked: another process (a serving
+        writer beside a reading one) may have recorded it since this one opened.
+        """
+        found = self._writer.projector.committed_identity
+        if found is None:
+            try:
+                with self._db.reading() as conn:
+                    stored = projections.load_identity(conn)
+            except FaultLedgerError:
+                return None
+            found = None if stored is None else stored[0]
+        return found
 
     @property
     def last_seq(self) -> int:
@@ -256,6 +293,7 @@ class FaultLedger:
                                     projections.Checkpoint(*event_log.head(conn),
                                                            projector.policy_seq))
             stat_tables.replace_all(conn, stats_of(projector).take(), projector.seq)
+            projections.replace_identity(conn, projector.identity, projector.identity_seq)
             writer.projector = projector
             return projector.seq
 
@@ -466,3 +504,11 @@ class FaultLedger:
     def _tick_interval(self) -> float:
         after = self.policy.auto_confirm_after_sec
         return 1.0 if after <= 0 else min(1.0, max(0.05, after / 10))
+
+
+def default_robot_id() -> str:
+    """The host name as a robot_id (characters a robot_id cannot hold become ``-``): what a
+    log records when no robot_id is configured."""
+    name = re.sub(r"[^A-Za-z0-9_.\-]", "-", socket.gethostname())
+    name = name[:validation.MAX_ROBOT_ID_LENGTH].lstrip("_.-")
+    return name or "robot"

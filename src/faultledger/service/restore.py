@@ -76,6 +76,7 @@ def restore(db: Database) -> tuple[Projector, int, int]:
         policy = event_log.policy_at(conn, checkpoint.policy_seq)
         stats_seq = stat_tables.checkpoint_seq(conn)
         tracks = stat_tables.load_tracks(conn) if stats_seq == checkpoint.seq else None
+        identity, identity_seq = projections.load_identity(conn) or (None, 0)
         projector = Projector(
             projections.load_faults(conn),
             Policy.model_validate(policy.policy) if policy else None,
@@ -83,6 +84,8 @@ def restore(db: Database) -> tuple[Projector, int, int]:
             policy_recorded=policy is not None,
             policy_seq=checkpoint.policy_seq,
             stats=StatsFold(tracks),
+            identity=identity,
+            identity_seq=identity_seq,
         )
         stored_seq = event_log.head(conn)[0]
     if tracks is None:
@@ -99,12 +102,15 @@ def restore(db: Database) -> tuple[Projector, int, int]:
 
 def persist_tail(db: Database, projector: Projector) -> Projector:
     """Bring lagging projections up to the log (in memory, and on disk when writable)."""
+    identified = projector.identity is not None
     try:
         with db.writing() as conn:
             projector.stage()
             found = apply_all(projector, event_log.read(conn, after_seq=projector.seq))
             projections.save(conn, projector.staged_faults(), found,
                              projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
+            if not identified and projector.identity is not None:
+                projections.save_identity(conn, projector.identity, projector.identity_seq)
             stat_tables.save(conn, stats_of(projector).take(), projector.seq)
         projector.commit()
     except FaultLedgerError as error:

@@ -7,6 +7,7 @@ from datetime import datetime
 from typing import Any
 
 from faultledger.domain.fault import Fault
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.errors import Reason
 
 
@@ -77,6 +78,8 @@ class VerifyReport:
     head_hash: str
     first_bad_seq: int | None = None
     problems: list[str] = field(default_factory=list)
+    identity: LedgerIdentity | None = None
+    """The identity the log's projection records (robot_id, ledger_id); None: none yet."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -27,16 +27,19 @@ from faultledger.domain.events import (
     FaultConfirmedByTimer,
     FaultReported,
     GoalOutcome,
+    LedgerIdentified,
     LogRecord,
     PolicyChanged,
     ReclassifiedOnStartup,
 )
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Effect, Projector, Transition
 from faultledger.errors import (
     DatabaseFullError,
     FaultLedgerError,
+    IdentityMismatchError,
     InternalError,
     LedgerClosedError,
     Reason,
@@ -46,7 +49,7 @@ from faultledger.errors import (
 from faultledger.service.results import ClearResult, ReportResult
 from faultledger.service.telemetry import Telemetry
 from faultledger.store import event_log, projections, stat_tables
-from faultledger.store.database import Database, WriteConnection
+from faultledger.store.database import Database, WriteConnection, describe
 
 log = logging.getLogger(__name__)
 
@@ -133,16 +136,34 @@ class _Pending:
 
 
 class _Batch:
-    """Records and effects of one group commit, built against the staged projector."""
+    """Records and effects of one group commit, built against the staged projector.
 
-    def __init__(self, projector: Projector, recorded_ns: int) -> None:
+    The first record of a log without identity is preceded by its ``ledger_identified``
+    record (``robot_id``, a fresh ledger_id), whatever the command: so every log a writer
+    touched names its robot, and the identity is part of the same commit.
+    """
+
+    def __init__(self, projector: Projector, recorded_ns: int, robot_id: str) -> None:
         self.projector = projector
         self.recorded_ns = recorded_ns
+        self.robot_id = robot_id
+        self.identified = False
+        """Whether this batch appends the log's identity record."""
         self.records: list[LogRecord] = []
         self.transitions: list[Transition] = []
         self.notifications: list[Notification] = []
 
+    def identify(self) -> None:
+        """Append the log's identity unless it has one."""
+        if self.projector.identity is None:
+            self._append(LedgerIdentified(self.robot_id, str(uuid.uuid4())), self.recorded_ns)
+            self.identified = True
+
     def add(self, event: DomainEvent, occurred_ns: int, event_id: str | None = None) -> int:
+        self.identify()
+        return self._append(event, occurred_ns, event_id)
+
+    def _append(self, event: DomainEvent, occurred_ns: int, event_id: str | None = None) -> int:
         record = LogRecord(
             seq=self.projector.seq + 1,
             event_id=event_id or str(uuid.uuid4()),
@@ -178,8 +199,16 @@ class Writer:
         desired_policy: Policy | None,
         announce: Callable[[list[Notification]], None],
         max_batch: int = 512,
+        *,
+        robot_id: str,
+        expected_robot_id: str | None = None,
     ) -> None:
         self.db = db
+        self.robot_id = robot_id
+        """Who this writer records as the robot of a log without identity."""
+        self.expected_robot_id = expected_robot_id
+        """Given explicitly: a log of another robot is refused (also one identified by
+        another process after this one opened it)."""
         self.projector = projector
         self.desired_policy = desired_policy
         self.max_batch = max_batch
@@ -358,7 +387,7 @@ class Writer:
         """
         projector = self.projector
         projector.stage()
-        batch = _Batch(projector, time.time_ns())
+        batch = _Batch(projector, time.time_ns(), self.robot_id)
         try:
             with self._connection.transaction() as conn:
                 if (self._head is None or self._head[0] != projector.seq
@@ -366,6 +395,7 @@ class Writer:
                         or any(isinstance(p.command, CatchUp) for p in group)):
                     self._head = event_log.head(conn)
                     self._catch_up(conn, self._head[0], batch)
+                self._check_identity()
                 ids = [p.command.event_id for p in group
                        if (isinstance(p.command, Report) and p.command.explicit_id)
                        or isinstance(p.command, RecordGoal)]
@@ -380,12 +410,23 @@ class Writer:
                                                             projector.policy_seq))
                     if projector.stats is not None:
                         stat_tables.save(conn, projector.stats.take(), projector.seq)
+                    if batch.identified and projector.identity is not None:
+                        projections.save_identity(conn, projector.identity,
+                                                  projector.identity_seq)
         except BaseException:
             projector.rollback()
             raise
         projector.commit()
         self._head = (projector.seq, head_hash)
         return batch
+
+    def _check_identity(self) -> None:
+        """Refuse to write into another robot's log (identified by another process since
+        this one opened it: ``FaultLedger.open`` refuses the ones identified before)."""
+        recorded = self.projector.identity
+        if (self.expected_robot_id is not None and recorded is not None
+                and recorded.robot_id != self.expected_robot_id):
+            raise identity_mismatch(self.db.url, recorded, self.expected_robot_id)
 
     @staticmethod
     def _fail(group: list[_Pending], error: FaultLedgerError) -> None:
@@ -456,6 +497,7 @@ class Writer:
                           batch.recorded_ns)
             return codes
         if isinstance(command, RecordPolicy):
+            batch.identify()  # a serving writer identifies the log when it starts
             self._ensure_policy(batch)
             return projector.policy
         if isinstance(command, CatchUp):
@@ -487,6 +529,16 @@ class Writer:
             return ReportResult(True, f"recorded as seq {seq}; changes no fault ({why})", seq,
                                 command.event_id)
         return ReportResult(True, f"recorded as seq {seq}", seq, command.event_id)
+
+
+def identity_mismatch(url: str, recorded: LedgerIdentity, wanted: str) -> IdentityMismatchError:
+    """The refusal of a log recording another robot_id, saying what to do instead."""
+    return IdentityMismatchError(
+        f"database {describe(url)} is the log of robot {recorded.robot_id!r} (ledger_id "
+        f"{recorded.ledger_id}), not of robot {wanted!r}; nothing was written. If it is "
+        f"another robot's log, give {wanted!r} its own database; if it is this robot's, set "
+        f"robot_id to {recorded.robot_id!r} (a log keeps the robot_id it recorded first). "
+        "Reading a copied log (verify, history) needs no robot_id: leave it unset")
 
 
 def clipped(error: BaseException, limit: int = 300) -> str:

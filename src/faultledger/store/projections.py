@@ -1,4 +1,5 @@
-"""Persistence of the projections (faults, transitions) and the seq they include."""
+"""Persistence of the projections (faults, transitions, the log's identity) and the seq they
+include."""
 
 from __future__ import annotations
 
@@ -10,12 +11,13 @@ from typing import Any
 from sqlalchemy import Connection, delete, select
 
 from faultledger.domain.fault import Fault
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json
 from faultledger.domain.projector import Transition
 from faultledger.domain.types import FaultStatus
 from faultledger.store import fastpath
 from faultledger.store.dialects import upsert
-from faultledger.store.schema import checkpoints, faults, transitions
+from faultledger.store.schema import checkpoints, faults, ledger_identity, transitions
 
 CHECKPOINT = "projection"
 _INSERT_TRANSITION = transitions.insert()
@@ -130,3 +132,23 @@ def replace_all(
     conn.execute(delete(faults))
     conn.execute(delete(transitions))
     save(conn, all_faults, all_transitions, checkpoint)
+
+
+def load_identity(conn: Connection) -> tuple[LedgerIdentity, int] | None:
+    """The log's identity and the seq of its record; None before one is recorded."""
+    row = conn.execute(select(ledger_identity).order_by(ledger_identity.c.seq).limit(1)).first()
+    return None if row is None else (LedgerIdentity(row.robot_id, row.ledger_id), int(row.seq))
+
+
+def save_identity(conn: Connection, identity: LedgerIdentity, seq: int) -> None:
+    """Record the identity once, in the transaction that appends (or first applies) its
+    record; the log never gets another, so this is an insert, never an update."""
+    conn.execute(ledger_identity.insert().values(seq=seq, robot_id=identity.robot_id,
+                                                 ledger_id=identity.ledger_id))
+
+
+def replace_identity(conn: Connection, identity: LedgerIdentity | None, seq: int) -> None:
+    """``rebuild``: the identity a full replay found (none: the table is emptied)."""
+    conn.execute(delete(ledger_identity))
+    if identity is not None:
+        save_identity(conn, identity, seq)

@@ -81,6 +81,16 @@ The hash anchors the head of the chain, so deleting the newest records is detect
 Every index on ``events`` costs each append; only the ones queries need exist.
 """
 
+ledger_identity = Table(
+    "ledger_identity",
+    metadata,
+    Column("seq", SeqType, primary_key=True, autoincrement=False),
+    Column("robot_id", String(128), nullable=False),
+    Column("ledger_id", String(36), nullable=False),
+)
+"""At most one row (Alembic 0004): the log's first ``ledger_identified`` record and its seq,
+so an open knows the identity without scanning the log."""
+
 # -- statistics projections (docs/statistics.md, "How they are served") ------------------------
 stat_facts = Table(
     "stat_facts",

@@ -12,13 +12,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Query
 from fastapi.responses import Response
 
+from faultledger.domain.identity import LedgerIdentity
 from faultledger.errors import InvalidInputError
 from faultledger.http import medkit
 from faultledger.http.context import Context
 from faultledger.http.heavy import SlotResponse, json_bytes, json_items
 from faultledger.service import times
 from faultledger.service.audit import count_history, export_history, seq_recorded_by
-from faultledger.service.exports import export_row, write_csv, write_jsonl
+from faultledger.service.exports import Writer, export_row, write_csv, write_jsonl
 from faultledger.service.tokens import Permission, Principal
 from faultledger.store.event_log import StoredRecord
 
@@ -39,16 +40,17 @@ class Order(StrEnum):
     desc = "desc"
 
 
-def _chunks(rows: Iterator[StoredRecord], write: Any) -> Iterator[str]:
-    """Text of ``write(rows, out)`` in pieces of ``STREAM_CHUNK`` rows; the CSV header
-    once."""
+def _chunks(rows: Iterator[StoredRecord], write: Writer, identity: LedgerIdentity | None
+            ) -> Iterator[str]:
+    """Text of ``write(rows, out, identity)`` in pieces of ``STREAM_CHUNK`` rows; the CSV
+    header once."""
     first = True
     while True:
         batch = [row for _, row in zip(range(STREAM_CHUNK), rows, strict=False)]
         if not batch and not first:
             return
         out = io.StringIO()
-        write(batch, out)
+        write(batch, out, identity)
         text = out.getvalue()
         if not first and write is write_csv:
             text = text.split("\n", 1)[1]  # the header only once
@@ -128,7 +130,8 @@ def router(context: Context) -> APIRouter:
                                           else "next_after_seq"): cursor}
                 if total:
                     extra["total"] = count_history(ledger, **filters)
-                return json_items(rows, export_row, extra)
+                identity = ledger.identity
+                return json_items(rows, lambda row: export_row(row, identity), extra)
 
             return SlotResponse(context.heavy, json_page, "application/json")
 
@@ -142,7 +145,7 @@ def router(context: Context) -> APIRouter:
                     yield from rows_iter
 
             write = write_csv if format is Format.csv else write_jsonl
-            return (text.encode() for text in _chunks(all_rows(), write))
+            return (text.encode() for text in _chunks(all_rows(), write, ledger.identity))
 
         # Every record: a chunk at a time in the heavy pool, other heavy reads between.
         if format is Format.csv:

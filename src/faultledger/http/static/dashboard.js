@@ -582,7 +582,8 @@ async function loadHistory(older) {
       const p = r.payload;
       const details = r.kind === "fault_reported" ? `${p.event_type} ${p.description || ""}`
         : r.kind === "fault_cleared" ? `by ${p.actor}${p.reason ? ": " + p.reason : ""}`
-        : r.kind === "goal_outcome" ? `${p.action} ${p.status}` : "";
+        : r.kind === "goal_outcome" ? `${p.action} ${p.status}`
+        : r.kind === "ledger_identified" ? `robot ${p.robot_id}, ledger ${p.ledger_id}` : "";
       const severity = r.kind === "fault_reported" ? cell(severityBadge(p.severity)) : el("td");
       const tr = row([r.seq, recordTime(r), r.kind, r.fault_code || "", severity,
         el("td", r.source_id || "", "text wide"), el("td", details, "text")]);
