@@ -81,7 +81,8 @@ def token_create(
     role: Annotated[str, typer.Option(
         "--role", metavar="ROLE",
         help="viewer (reads), reporter (POST reports only), operator (reads, "
-        "reports, clears) or admin (everything).")],
+        "reports, clears), admin (everything) or robot (pushes the log of the robot "
+        "NAME to a fleet central, nothing else).")],
     config: ConfigOption = None,
     file: Annotated[Path | None, typer.Option(
         "--file", metavar="FILE",

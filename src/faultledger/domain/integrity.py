@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Any
+from collections.abc import Iterable, Sequence
+from typing import Any, NamedTuple
 
 GENESIS_HASH = "0" * 64
 """The ``prev_hash`` of record 1."""
@@ -40,3 +41,37 @@ def record_hash(
     digest.update(canonical.encode("utf-8"))
     digest.update(payload_json.encode("utf-8"))
     return digest.hexdigest()
+
+
+class ChainWalk(NamedTuple):
+    """How far a walk of the chain got: records read, the last good (seq, hash), and the
+    first bad seq with the problem (None: intact)."""
+
+    records: int
+    head_seq: int
+    head_hash: str
+    first_bad_seq: int | None
+    problem: str | None
+
+
+def walk_chain(rows: Iterable[Sequence[Any]], prev_seq: int, prev_hash: str) -> ChainWalk:
+    """Recompute every hash of stored rows (seq, event_id, kind, fault_code, source_id,
+    payload, occurred_at_ns, recorded_at_ns, schema_version, hash) in seq order after
+    (prev_seq, prev_hash): edits, deletions, insertions and reorders show up. The one rule
+    for a robot's log and for the copy a fleet central holds of it."""
+    count = 0
+    for row in rows:
+        seq, event_id, kind, code, source, payload, occurred, recorded, version, digest = row
+        count += 1
+        if seq != prev_seq + 1:
+            return ChainWalk(count, prev_seq, prev_hash, prev_seq + 1,
+                             f"record {prev_seq + 1} is missing (next stored record is "
+                             f"{seq}): records were deleted or renumbered")
+        expected = record_hash(prev_hash, seq, event_id, kind, code, source, payload, occurred,
+                               recorded, version)
+        if expected != digest:
+            return ChainWalk(count, prev_seq, prev_hash, seq,
+                             f"record {seq} does not match its hash: it was edited, "
+                             "inserted or moved")
+        prev_seq, prev_hash = seq, digest
+    return ChainWalk(count, prev_seq, prev_hash, None, None)

@@ -21,6 +21,7 @@ from faultledger.http.heavy import HeavyReads
 from faultledger.http.protection import AllowedHosts, BrowserGuard
 from faultledger.http.stream import StreamHub
 from faultledger.service.config import HttpSettings
+from faultledger.service.fleet import Fleet
 from faultledger.service.ledger import FaultLedger
 from faultledger.service.tokens import TokenBook, TokenWatcher
 from faultledger.version import version
@@ -46,7 +47,8 @@ def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalen
     hub = StreamHub(ledger, medkit.stream_data, settings.stream_buffer)
     authorizer = Authorizer(tokens, open_without_tokens=loopback)
     heavy = HeavyReads(settings.heavy_reads, settings.heavy_queue, settings.heavy_wait_sec)
-    context = Context(ledger, settings, calendar, authorizer, hub, read_only, heavy)
+    context = Context(ledger, settings, calendar, authorizer, hub, read_only, heavy,
+                      fleet=Fleet(ledger))
     watcher = TokenWatcher(settings, authorizer.replace)
 
     @asynccontextmanager
@@ -59,6 +61,8 @@ def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalen
             watcher.stop()
             hub.stop()
             heavy.close()
+            context.pushes.close()
+            context.robot_logs().close()
 
     # /docs (Swagger UI) from assets this server serves (fastapi-offline), not FastAPI's
     # CDN: a robot has no internet. No /redoc: ReDoc's page fetches Redocly's logo from a CDN.

@@ -34,6 +34,7 @@ _WHAT = {
     Permission.REPORT: "post reports",
     Permission.CLEAR: "clear faults",
     Permission.ADMINISTER: "administer the ledger",
+    Permission.PUSH: "push a robot's log to the fleet central",
 }
 
 

@@ -10,6 +10,7 @@ from faultledger.http.auth import Authorizer
 from faultledger.http.heavy import HeavyReads
 from faultledger.http.stream import StreamHub
 from faultledger.service.config import HttpSettings
+from faultledger.service.fleet import Fleet
 from faultledger.service.ledger import FaultLedger
 
 
@@ -24,3 +25,21 @@ class Context:
     """A follower (``serve --follower --http``): every mutation answers 503 ``unavailable``."""
     heavy: HeavyReads = field(default_factory=lambda: HeavyReads(1, 16, 10.0))
     """The pool statistics, history, state-at and shift reports are computed in."""
+    fleet: Fleet | None = None
+    """The robot logs this server holds as a fleet central (made by the app)."""
+    pushes: HeavyReads = field(default_factory=lambda: HeavyReads(
+        PUSH_SLOTS, PUSH_QUEUE, PUSH_WAIT_SEC, what="robot log batches",
+        settings="{slots} at a time, {queue} waiting"))
+    """Where a fleet central checks and stores robots' batches: two at a time (one checked
+    while the other commits) however many robots push, so threads do not fight over the
+    interpreter and each batch is answered sooner (bench/fleet.py)."""
+
+
+    def robot_logs(self) -> Fleet:
+        assert self.fleet is not None, "the app makes the fleet"
+        return self.fleet
+
+
+PUSH_SLOTS = 2
+PUSH_QUEUE = 256
+PUSH_WAIT_SEC = 30.0

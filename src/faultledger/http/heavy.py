@@ -37,7 +37,11 @@ Chunks = Iterator[bytes]
 
 
 class HeavyReads:
-    def __init__(self, slots: int, queue: int, wait_sec: float) -> None:
+    def __init__(self, slots: int, queue: int, wait_sec: float, *,
+                 what: str = "heavy reads (statistics, history, state-at, shift report)",
+                 settings: str = "http.heavy_reads {slots}, http.heavy_queue {queue}") -> None:
+        self.what = what
+        self.settings = settings
         self.slots = slots
         self.queue = queue
         self.wait_sec = wait_sec
@@ -82,11 +86,11 @@ class HeavyReads:
     def _refuse(self) -> None:
         self.refused += 1
         after = max(1, min(60, math.ceil(self._seconds * (self.waiting + 1) / self.slots)))
+        settings = self.settings.format(slots=self.slots, queue=self.queue)
         raise ApiError(Reason.UNAVAILABLE,
-                       f"busy: {self.running} heavy reads (statistics, history, state-at, "
-                       f"shift report) are being computed and {self.waiting} wait "
-                       f"(http.heavy_reads {self.slots}, http.heavy_queue {self.queue}); "
-                       f"retry in {after} s", {"Retry-After": str(after)})
+                       f"busy: {self.running} {self.what} are being computed and "
+                       f"{self.waiting} wait ({settings}); retry in {after} s",
+                       {"Retry-After": str(after)})
 
     async def call(self, work: Callable[..., T], *args: Any) -> T:
         """``work(*args)`` on one of the pool's threads (the caller holds a slot)."""

@@ -18,6 +18,7 @@ from prometheus_client.registry import Collector
 from faultledger.domain.types import FaultStatus
 from faultledger.http.context import Context
 from faultledger.http.medkit import severity_label
+from faultledger.service.fleet import Fleet
 from faultledger.service.telemetry import COMMIT_BUCKETS
 
 
@@ -65,6 +66,25 @@ class LedgerCollector(Collector):
                                       "disconnected for falling behind the buffer")
         dropped.add_metric([], hub.dropped_clients)
         yield dropped
+        yield from _fleet(self._context.robot_logs())
+
+
+def _fleet(robot_logs: Fleet) -> Iterator[Metric]:
+    """Per robot log a central holds (docs/fleet.md, "Lag"); nothing on a robot."""
+    labels = ["robot_id", "ledger_id"]
+    seconds = GaugeMetricFamily("faultledger_fleet_lag_seconds", "How far behind the central "
+                                "is with a robot's log: now minus the time up to which it "
+                                "holds all of it", labels=labels)
+    records = GaugeMetricFamily("faultledger_fleet_lag_records", "Records a robot had and the "
+                                "central lacked at the robot's last contact", labels=labels)
+    held = GaugeMetricFamily("faultledger_fleet_records", "Records of a robot's log the "
+                             "central holds", labels=labels)
+    for chain in robot_logs.robots():
+        key = [chain.robot_id, chain.ledger_id]
+        seconds.add_metric(key, chain.lag_seconds)
+        records.add_metric(key, chain.lag_records)
+        held.add_metric(key, chain.records)
+    yield from (seconds, records, held)
 
 
 def registry(context: Context) -> CollectorRegistry:

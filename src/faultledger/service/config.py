@@ -63,7 +63,7 @@ class TokenEntry(BaseModel):
 
     name: str = Field(min_length=1, max_length=64, pattern=TOKEN_NAME_PATTERN)
     """Who holds it: recorded as the actor of every change made with it."""
-    role: Literal["viewer", "reporter", "operator", "admin"]
+    role: Literal["viewer", "reporter", "operator", "admin", "robot"]
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
     expires_at: datetime | None = None
     """When it stops working (UTC); None: never. A time without a zone is UTC."""

@@ -31,6 +31,7 @@ from pathlib import Path
 import yaml
 from pydantic import BaseModel, ConfigDict, Field
 
+from faultledger.domain.fleet import robot_id_error
 from faultledger.errors import ConfigError, FaultLedgerError, Reason
 from faultledger.service import config
 from faultledger.service.config import (
@@ -62,6 +63,9 @@ class Role(StrEnum):
     """Reads, reports, and clears faults."""
     ADMIN = "admin"
     """Everything, including verify."""
+    ROBOT = "robot"
+    """Pushes its own log to a fleet central, and nothing else: its name is the robot_id of
+    the only logs it may push (docs/fleet.md)."""
 
 
 class Permission(StrEnum):
@@ -69,6 +73,7 @@ class Permission(StrEnum):
     REPORT = "report"
     CLEAR = "clear"
     ADMINISTER = "administer"
+    PUSH = "push"
 
 
 GRANTS: dict[Role, frozenset[Permission]] = {
@@ -76,6 +81,7 @@ GRANTS: dict[Role, frozenset[Permission]] = {
     Role.REPORTER: frozenset({Permission.REPORT}),
     Role.OPERATOR: frozenset({Permission.READ, Permission.REPORT, Permission.CLEAR}),
     Role.ADMIN: frozenset(Permission),
+    Role.ROBOT: frozenset({Permission.PUSH}),
 }
 
 
@@ -223,6 +229,10 @@ def issue(path: Path, name: str, role: Role, lifetime: timedelta | None = None,
     """Add a new token for ``name`` to the token file (created 0600) and return the token,
     which is shown once and stored nowhere, with its entry."""
     check_name(name)
+    if role is Role.ROBOT:
+        problem = robot_id_error(name)
+        if problem:
+            raise ConfigError(f"a robot token's name is the robot_id it may push: {problem}")
     now = now or datetime.now(UTC)
     expires_at = None
     if lifetime is not None:  # whole seconds, never sooner than asked

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import sqlite3
 import stat
@@ -15,7 +16,7 @@ from sqlalchemy import Connection, Engine, create_engine, exc
 from sqlalchemy.engine import make_url
 
 from faultledger.errors import NotADatabaseError, StoreError
-from faultledger.store.dialects import BUSY_TIMEOUT_MS, DialectRules, rules_for
+from faultledger.store.dialects import BUSY_TIMEOUT_MS, WRITE_LOCK, DialectRules, rules_for
 
 __all__ = ["BUSY_TIMEOUT_MS", "Database", "WriteConnection", "describe", "translate_errors"]
 
@@ -35,6 +36,26 @@ def _sqlite_file(url: str) -> Path | None:
     if not database or database == ":memory:" or database.startswith("file:"):
         return None
     return Path(database)
+
+
+def schema_of(url: str) -> str | None:
+    """The PostgreSQL schema a URL names (``?options=-csearch_path=NAME``), else None: a
+    fleet central keeps each robot log in a schema of its own (store/fleet_log.py)."""
+    options = make_url(url).query.get("options")
+    text = " ".join(options) if isinstance(options, tuple) else (options or "")
+    for word in text.split():
+        if word.startswith("-csearch_path="):
+            return word.removeprefix("-csearch_path=")
+    return None
+
+
+def write_lock_key(url: str) -> int:
+    """One write lock per log: per database, or per schema where a URL names one."""
+    schema = schema_of(url)
+    if schema is None:
+        return WRITE_LOCK
+    return int.from_bytes(hashlib.sha256(f"schema:{schema}".encode()).digest()[:8], "big",
+                          signed=True)
 
 
 def describe(url: str) -> str:
@@ -69,6 +90,7 @@ class Database:
         self.dialect = self.engine.dialect.name
         self.rules: DialectRules = rules_for(self.dialect)
         self.rules.configure(self.engine)
+        self.engine.update_execution_options(faultledger_lock_key=write_lock_key(url))
 
     @contextlib.contextmanager
     def reading(self) -> Iterator[Connection]:
@@ -76,10 +98,13 @@ class Database:
             yield conn
 
     @contextlib.contextmanager
-    def writing(self) -> Iterator[Connection]:
-        """One write transaction holding the log's write lock."""
+    def writing(self, lock_key: int | None = None) -> Iterator[Connection]:
+        """One write transaction holding the log's write lock, or another lock of the same
+        database where the dialect has several (PostgreSQL: a fleet chain's own lock)."""
         with translate_errors(self.url), self.engine.connect() as raw:
             conn = raw.execution_options(faultledger_write=True)
+            if lock_key is not None:
+                conn = conn.execution_options(faultledger_lock_key=lock_key)
             with conn.begin():
                 yield conn
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import sqlite3
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from functools import lru_cache
 from typing import Any
 
@@ -73,6 +73,21 @@ class DialectRules:
 
     def classify(self, where: str, text: str, error: BaseException) -> StoreError | None:
         return None
+
+    def insert_rows(self, conn: Connection, table: Table, columns: Sequence[str],
+                    rows: Sequence[Sequence[Any]]) -> None:
+        """Many rows of plain values (int, str, None) into ``table``, in the caller's
+        transaction, the fastest way the database offers (executemany here)."""
+        if not rows:
+            return
+        marks = ", ".join("?" if self.name == "sqlite" else "%s" for _ in columns)
+        driver: Any = conn.connection.driver_connection
+        cursor = driver.cursor()
+        try:
+            cursor.executemany(f"INSERT INTO {table.name} ({', '.join(columns)}) "
+                               f"VALUES ({marks})", rows)
+        finally:
+            cursor.close()
 
 
 class SQLiteRules(DialectRules):
@@ -150,6 +165,10 @@ class PostgreSQLRules(DialectRules):
             conn.exec_driver_sql(f"SELECT pg_advisory_unlock({MIGRATE_LOCK})")
             conn.commit()
 
+    def insert_rows(self, conn: Connection, table: Table, columns: Sequence[str],
+                    rows: Sequence[Sequence[Any]]) -> None:
+        _copy_rows(conn, table, columns, rows)
+
     def driver_errors(self) -> tuple[type[BaseException], ...]:
         try:
             import psycopg
@@ -178,11 +197,25 @@ class PostgreSQLRules(DialectRules):
         return None
 
 
+def _copy_rows(conn: Connection, table: Table, columns: Sequence[str],
+               rows: Sequence[Sequence[Any]]) -> None:
+    """PostgreSQL's COPY: about 8× faster than executemany for a fleet batch (bench/fleet.py)."""
+    if not rows:
+        return
+    driver: Any = conn.connection.driver_connection
+    with driver.cursor() as cursor, cursor.copy(
+            f"COPY {table.name} ({', '.join(columns)}) FROM STDIN") as copy:
+        for row in rows:
+            copy.write_row(row)
+
+
 def _postgresql_begin(conn: Connection) -> None:
     driver: Any = conn.connection.driver_connection
-    if conn.get_execution_options().get("faultledger_write", False):
+    options = conn.get_execution_options()
+    if options.get("faultledger_write", False):
+        key = int(options.get("faultledger_lock_key", WRITE_LOCK))
         driver.execute(f"SET LOCAL lock_timeout = {BUSY_TIMEOUT_MS}")
-        driver.execute(f"SELECT pg_advisory_xact_lock({WRITE_LOCK})")
+        driver.execute(f"SELECT pg_advisory_xact_lock({key})")
     else:
         driver.execute("SET TRANSACTION ISOLATION LEVEL REPEATABLE READ")
 

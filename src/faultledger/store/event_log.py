@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 from fnmatch import fnmatchcase
 from typing import Any, NamedTuple
 
-from sqlalchemy import Connection, Integer, Select, bindparam, func, select
+from sqlalchemy import ColumnElement, Connection, Integer, Select, Table, bindparam, func, select
 
 from faultledger.domain.events import (
     POLICY_CHANGED,
@@ -17,8 +17,10 @@ from faultledger.domain.events import (
     UnknownRecordError,
     decode,
 )
-from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
+from faultledger.domain.fleet import PushedRecord
+from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash, walk_chain
 from faultledger.store import fastpath
+from faultledger.store.dialects import rules_for
 from faultledger.store.schema import events
 
 READ_CHUNK = 5_000
@@ -65,6 +67,25 @@ def append(conn: Connection, records: Sequence[LogRecord], prev_hash: str) -> st
         })
     fastpath.execute_many(conn, _INSERT, rows)
     return prev_hash
+
+
+_VERBATIM_COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "payload",
+                     "occurred_at_ns", "recorded_at_ns", "schema_version", "hash")
+
+
+def append_verbatim(conn: Connection, records: Sequence[PushedRecord]) -> None:
+    """Insert records exactly as another log stored them (a fleet central's copy of a robot
+    log; the caller checked their hashes and that they continue this log)."""
+    rules_for(conn.dialect.name).insert_rows(conn, events, _VERBATIM_COLUMNS, [
+        (r.seq, r.event_id, r.kind, r.fault_code, r.source_id, r.payload, r.occurred_at_ns,
+         r.recorded_at_ns, r.schema_version, r.hash) for r in records])
+
+
+def hashes_between(conn: Connection, first_seq: int, last_seq: int) -> dict[int, str]:
+    """Stored hashes of records first_seq..last_seq."""
+    rows = conn.execute(select(events.c.seq, events.c.hash).where(
+        events.c.seq >= first_seq, events.c.seq <= last_seq))
+    return {int(seq): str(digest) for seq, digest in rows}
 
 
 _raw_decode = json.JSONDecoder().raw_decode  # payloads are canonical: no whitespace to skip
@@ -139,9 +160,9 @@ def find(conn: Connection, where: RecordFilter) -> list[LogRecord]:
 
 def iter_find(conn: Connection, where: RecordFilter) -> Iterator[LogRecord]:
     """``find`` streamed: one statement whose rows are fetched in chunks as they are used."""
-    query = _filtered(conn, select(events), where)
+    query = filtered(conn, select(events), where)
     if query is not None:
-        for row in _stream(conn, query):
+        for row in stream_rows(conn, query):
             yield _to_record(row)
 
 
@@ -173,10 +194,10 @@ def iter_stored(conn: Connection, where: RecordFilter) -> Iterator[StoredRecord]
     """Rows matching ``where`` as stored (no decoding), each joined with its predecessor's hash."""
     base = (select(*events.c, _PREVIOUS.c.hash)
             .select_from(events.outerjoin(_PREVIOUS, _PREVIOUS.c.seq == events.c.seq - 1)))
-    query = _filtered(conn, base, where)
+    query = filtered(conn, base, where)
     if query is None:
         return
-    for row in _stream(conn, query):
+    for row in stream_rows(conn, query):
         seq, event_id, kind, code, source, payload, occurred, recorded, version, digest, prev = row
         if prev is None and seq == 1:
             prev = GENESIS_HASH
@@ -184,7 +205,7 @@ def iter_stored(conn: Connection, where: RecordFilter) -> Iterator[StoredRecord]
                            int(recorded), int(version), digest, prev)
 
 
-def _stream(conn: Connection, query: Select[Any]) -> Iterator[Sequence[Any]]:
+def stream_rows(conn: Connection, query: Select[Any]) -> Iterator[Sequence[Any]]:
     """Rows of one statement in chunks: SQLite steps lazily, PostgreSQL uses a server cursor."""
     result = conn.execute(query.execution_options(yield_per=READ_CHUNK))
     for chunk in result.partitions():
@@ -194,42 +215,48 @@ def _stream(conn: Connection, query: Select[Any]) -> Iterator[Sequence[Any]]:
 def count_matching(conn: Connection, where: RecordFilter) -> int:
     """How many records match ``where`` (its ``limit`` aside): an index count when a code,
     seq range or time bounds it, a pass over the log otherwise."""
-    query = _filtered(conn, select(func.count()).select_from(events),
+    query = filtered(conn, select(func.count()).select_from(events),
                       replace(where, limit=None), ordered=False)
     return 0 if query is None else int(conn.execute(query).scalar() or 0)
 
 
-def _filtered(conn: Connection, query: Select[Any], where: RecordFilter, *,
-              ordered: bool = True) -> Select[Any] | None:
+def filtered(conn: Connection, query: Select[Any], where: RecordFilter, *,
+              ordered: bool = True, table: Table = events,
+              scope: ColumnElement[bool] | None = None) -> Select[Any] | None:
     """``query`` restricted by ``where`` in seq order (newest first when ``descending``);
-    None when no stored code can match."""
+    None when no stored code can match. ``table`` is ``events`` or a table of the same
+    columns (a fleet central's copy of robot logs, with ``scope`` picking one chain)."""
+    c = table.c
+    if scope is not None:
+        query = query.where(scope)
     if ordered:
-        query = query.order_by(events.c.seq.desc() if where.descending else events.c.seq)
+        query = query.order_by(c.seq.desc() if where.descending else c.seq)
     if where.fault_code is not None:
-        query = query.where(events.c.fault_code == where.fault_code)
+        query = query.where(c.fault_code == where.fault_code)
     if where.codes:
-        codes = matching_codes(conn, where.codes)
+        codes = matching_codes(conn, where.codes, table, scope)
         if not codes:
             return None
-        query = query.where(events.c.fault_code.in_(codes))
+        query = query.where(c.fault_code.in_(codes))
     if where.source_id is not None:
-        query = query.where(events.c.source_id == where.source_id)
+        query = query.where(c.source_id == where.source_id)
     if where.since_ns is not None:
-        query = query.where(events.c.occurred_at_ns >= where.since_ns)
+        query = query.where(c.occurred_at_ns >= where.since_ns)
     if where.until_ns is not None:
-        query = query.where(events.c.occurred_at_ns < where.until_ns)
+        query = query.where(c.occurred_at_ns < where.until_ns)
     if where.from_seq is not None:
-        query = query.where(events.c.seq >= where.from_seq)
+        query = query.where(c.seq >= where.from_seq)
     if where.to_seq is not None:
-        query = query.where(events.c.seq <= where.to_seq)
+        query = query.where(c.seq <= where.to_seq)
     if where.kinds:
-        query = query.where(events.c.kind.in_(where.kinds))
+        query = query.where(c.kind.in_(where.kinds))
     if where.limit is not None:
         query = query.limit(where.limit)
     return query
 
 
-def matching_codes(conn: Connection, patterns: Sequence[str]) -> list[str]:
+def matching_codes(conn: Connection, patterns: Sequence[str], table: Table = events,
+                   scope: ColumnElement[bool] | None = None) -> list[str]:
     """Exact codes as given plus the stored codes a glob matches (fnmatch, case-sensitive).
 
     Globs are matched in Python against the distinct stored codes, so the records themselves
@@ -239,7 +266,7 @@ def matching_codes(conn: Connection, patterns: Sequence[str]) -> list[str]:
     globs = [pattern for pattern in patterns if is_glob(pattern)]
     if globs:
         prefix = _common_prefix([_literal_prefix(g) for g in globs])
-        found.update(code for code in distinct_codes(conn, prefix)
+        found.update(code for code in distinct_codes(conn, prefix, table, scope)
                      if any(fnmatchcase(code, g) for g in globs))
     return sorted(found)
 
@@ -258,7 +285,8 @@ def _common_prefix(texts: Sequence[str]) -> str:
     return first[:size]
 
 
-def distinct_codes(conn: Connection, prefix: str = "") -> Iterator[str]:
+def distinct_codes(conn: Connection, prefix: str = "", table: Table = events,
+                   scope: ColumnElement[bool] | None = None) -> Iterator[str]:
     """Distinct stored fault codes in order, by a loose index scan of ix_events_fault_code_seq.
 
     One index seek per distinct code instead of a pass over every record. On SQLite (binary
@@ -266,7 +294,7 @@ def distinct_codes(conn: Connection, prefix: str = "") -> Iterator[str]:
     elsewhere a collation may order codes differently, so every code is visited.
     """
     bounded = bool(prefix) and conn.dialect.name == "sqlite"
-    column = events.c.fault_code
+    column = table.c.fault_code
     last: str | None = None
     while True:
         if last is not None:
@@ -275,6 +303,8 @@ def distinct_codes(conn: Connection, prefix: str = "") -> Iterator[str]:
             condition = column >= prefix
         else:
             condition = column.is_not(None)
+        if scope is not None:
+            condition = condition & scope
         code = conn.execute(select(func.min(column)).where(condition)).scalar()
         if code is None or (bounded and not str(code).startswith(prefix)):
             return
@@ -334,20 +364,10 @@ def check_chain(conn: Connection, from_seq: int = 1, to_seq: int | None = None) 
         if anchor is None:
             return ChainCheck(0, prev_seq, "", *_missing(conn, prev_seq, prev_seq))
         prev_hash = anchor
-    for row in _rows(conn, prev_seq, to_seq):
-        seq, event_id, kind, code, source, payload, occurred, recorded, version, digest = row
-        count += 1
-        if seq != prev_seq + 1:
-            return ChainCheck(count, prev_seq, prev_hash, prev_seq + 1,
-                              f"record {prev_seq + 1} is missing (next stored record is "
-                              f"{seq}): records were deleted or renumbered")
-        expected = record_hash(prev_hash, seq, event_id, kind, code, source, payload, occurred,
-                               recorded, version)
-        if expected != digest:
-            return ChainCheck(count, prev_seq, prev_hash, seq,
-                              f"record {seq} does not match its hash: it was edited, "
-                              "inserted or moved")
-        prev_seq, prev_hash = seq, digest
+    walked = walk_chain(_rows(conn, prev_seq, to_seq), prev_seq, prev_hash)
+    if walked.problem is not None:
+        return ChainCheck(*walked)
+    count, prev_seq, prev_hash = walked.records, walked.head_seq, walked.head_hash
     # A segment must reach its end; an open one that starts after seq 1 must hold a record.
     last_needed = to_seq if to_seq is not None else (from_seq if from_seq > 1 else 0)
     if prev_seq < last_needed:
@@ -383,5 +403,5 @@ def read_of_codes(conn: Connection, codes: Sequence[str]) -> Iterator[LogRecord]
     query = (select(events).where(events.c.fault_code.in_(list(codes))
                                   | (events.c.kind == POLICY_CHANGED))
              .order_by(events.c.seq))
-    for row in _stream(conn, query):
+    for row in stream_rows(conn, query):
         yield _to_record(row)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import threading
 from functools import lru_cache
 from pathlib import Path
 
@@ -51,6 +52,12 @@ def checked_revision(db: Database) -> str | None:
     return current
 
 
+_IN_THIS_PROCESS = threading.Lock()
+"""Alembic keeps the running migration in module globals (``alembic.op``, ``context``): two
+threads migrating two databases at once (a fleet central opening two new robot logs)
+would run each other's operations. One migration at a time per process."""
+
+
 def ensure_current(db: Database, upgrade: bool = True) -> str:
     """Bring the schema to head (or refuse, with ``upgrade=False``); returns the head revision.
 
@@ -68,7 +75,11 @@ def ensure_current(db: Database, upgrade: bool = True) -> str:
         )
     config = Config()
     config.set_main_option("script_location", str(migrations_dir()))
-    with translate_errors(db.url), db.engine.connect() as conn, db.rules.migration_lock(conn):
+    with _IN_THIS_PROCESS, translate_errors(db.url), db.engine.connect() as raw, \
+            db.rules.migration_lock(raw):
+        # SQLite: the whole upgrade in one write transaction (BEGIN IMMEDIATE), so processes
+        # opening a new file together wait for the first instead of failing "locked".
+        conn = raw.execution_options(faultledger_write=True) if db.dialect == "sqlite" else raw
         if MigrationContext.configure(conn).get_current_revision() != head:
             config.attributes["connection"] = conn
             command.upgrade(config, "head")

@@ -187,3 +187,23 @@ stat_codes = Table(
     Column("episode_start_seq", BigInteger, nullable=True),
 )
 """The statistics fold's per-code state (domain.statistics.CodeTrack)."""
+
+# -- a fleet central's directory of robot logs (store/fleet_log.py, docs/fleet.md) ------------
+fleet_chains = Table(
+    "fleet_chains",
+    metadata,
+    Column("chain_id", Integer, primary_key=True, autoincrement=True),
+    Column("ledger_id", String(36), nullable=False, unique=True),
+    Column("robot_id", String(128), nullable=False),
+    Column("last_seq", BigInteger, nullable=False),
+    Column("last_hash", String(64), nullable=False),
+    Column("head_seq", BigInteger, nullable=False),
+    Column("first_contact_ns", BigInteger, nullable=False),
+    Column("last_contact_ns", BigInteger, nullable=False),
+    Column("last_recorded_ns", BigInteger, nullable=False),
+    Column("complete_until_ns", BigInteger, nullable=False),
+)
+"""``last_seq``/``last_hash``: how far the central holds the log (its own log's head is the
+truth; this row follows it after each push). ``head_seq``: the robot's newest seq at its last
+contact. ``complete_until_ns``: the time up to which the central holds the robot's whole log."""
+Index("ix_fleet_chains_robot", fleet_chains.c.robot_id, fleet_chains.c.first_contact_ns)

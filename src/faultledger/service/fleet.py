@@ -1,0 +1,304 @@
+"""The central's side of store and forward (docs/fleet.md): take a robot's batch of records,
+check it, keep it in that robot log's own copy; say how far behind each robot is; read a
+robot's logs back.
+
+Each robot log the central receives is kept as a faultledger log of its own (store/fleet_log.py:
+a PostgreSQL schema, or a SQLite file beside the central's), written only by ``Import``
+(service/writer.py: records verbatim, projections and statistics as the robot computes
+them). So everything the central says about a robot is computed by the same code over the
+same records as on the robot, figure for figure.
+
+A batch is checked whole before anything is stored (domain/fleet.py: every hash, the chain
+inside it, the identity), then by the log's own writer under its write lock against what it
+holds: a record held already must be the same (then it is ignored: a batch sent again after
+a lost answer), the first new one must continue the log. Logs of different robots are
+written concurrently (one write lock per log).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from datetime import datetime
+
+from faultledger.domain.clock import NS_PER_SECOND, from_ns
+from faultledger.domain.fleet import (
+    MAX_BATCH_RECORDS,
+    BatchError,
+    PushedRecord,
+    check_batch,
+    ledger_id_error,
+    robot_id_error,
+)
+from faultledger.domain.identity import LedgerIdentity
+from faultledger.errors import InvalidInputError
+from faultledger.service import audit
+from faultledger.service.ledger import FaultLedger
+from faultledger.service.results import VerifyReport
+from faultledger.service.writer import Import, Imported
+from faultledger.store import fleet_log
+from faultledger.store.event_log import StoredRecord
+
+__all__ = ["MAX_BATCH_RECORDS", "MAX_HASH_PAGE", "ChainStatus", "Fleet", "PushAnswer",
+           "PushBatch"]
+
+MAX_HASH_PAGE = 10_000
+OPEN_LOGS = 32
+"""Robot logs a central keeps open at once (each holds a database connection for its
+writer); more are opened and closed as they are used."""
+
+
+@dataclass(frozen=True, slots=True)
+class PushBatch:
+    robot_id: str
+    ledger_id: str
+    head_seq: int
+    records: Sequence[PushedRecord]
+
+
+@dataclass(frozen=True, slots=True)
+class PushAnswer:
+    robot_id: str
+    ledger_id: str
+    last_seq: int
+    last_hash: str
+    stored: int
+    ignored: int
+
+
+@dataclass(frozen=True, slots=True)
+class ChainStatus:
+    """One robot log as the central holds it (``GET /api/v1/fleet/robots``)."""
+
+    robot_id: str
+    ledger_id: str
+    last_seq: int
+    last_hash: str
+    records: int
+    last_pushed_at: datetime
+    lag_seconds: float
+    complete_until: datetime | None
+    """The central holds every record the robot wrote up to here (None: nothing yet)."""
+    lag_records: int
+    """Records the robot had and the central lacked at the robot's last contact."""
+
+
+@dataclass(frozen=True, slots=True)
+class ChainCheck:
+    robot_id: str
+    ledger_id: str
+    report: VerifyReport
+
+
+def directory_lock_key(ledger_id: str) -> int:
+    """A 64-bit advisory lock key per log for its row in the directory."""
+    return int.from_bytes(hashlib.sha256(f"fleet:{ledger_id}".encode()).digest()[:8], "big",
+                          signed=True)
+
+
+class _Open:
+    def __init__(self, ledger: FaultLedger) -> None:
+        self.ledger = ledger
+        self.users = 0
+
+
+class Fleet:
+    """A central's robot logs: pushes in, status and reads out. Thread-safe; ``close`` it."""
+
+    def __init__(self, central: FaultLedger, open_logs: int = OPEN_LOGS) -> None:
+        self.central = central
+        self._open_logs = open_logs
+        self._logs: OrderedDict[int, _Open] = OrderedDict()
+        self._lock = threading.Lock()
+        self._opening: dict[int, threading.Lock] = {}
+
+    def close(self) -> None:
+        with self._lock:
+            logs, self._logs = list(self._logs.values()), OrderedDict()
+        for held in logs:
+            held.ledger.close()
+
+    def __enter__(self) -> Fleet:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+    # -- the logs ----------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def log(self, chain: fleet_log.Chain) -> Iterator[FaultLedger]:
+        """The robot log of ``chain``, open while the caller uses it."""
+        with self._lock:
+            held = self._logs.get(chain.chain_id)
+            if held is not None:
+                self._logs.move_to_end(chain.chain_id)
+                held.users += 1
+            opening = self._opening.setdefault(chain.chain_id, threading.Lock())
+        if held is None:
+            with opening:  # one thread opens (and migrates) a log; the others wait for it
+                with self._lock:
+                    held = self._logs.get(chain.chain_id)
+                    if held is not None:
+                        held.users += 1
+                if held is None:
+                    url = fleet_log.chain_url(self.central.url, chain.chain_id)
+                    ledger = FaultLedger.open(url, background=False)
+                    with self._lock:
+                        held = self._logs[chain.chain_id] = _Open(ledger)
+                        held.users += 1
+                    self._evict()
+        try:
+            yield held.ledger
+        finally:
+            with self._lock:
+                held.users -= 1
+            self._evict()
+
+    def _evict(self) -> None:
+        """Close the least recently used idle logs beyond ``open_logs``."""
+        closing: list[_Open] = []
+        with self._lock:
+            for chain_id in list(self._logs):
+                if len(self._logs) - len(closing) <= self._open_logs:
+                    break
+                if self._logs[chain_id].users == 0:
+                    closing.append(self._logs.pop(chain_id))
+        for held in closing:
+            held.ledger.close()
+
+    def _chain(self, ledger_id: str) -> fleet_log.Chain | None:
+        with self.central._db.reading() as conn:
+            return fleet_log.chain_of(conn, ledger_id)
+
+    def chains(self, robot_id: str | None = None) -> list[fleet_log.Chain]:
+        with self.central._db.reading() as conn:
+            return fleet_log.chains(conn, robot_id)
+
+    # -- pushes ------------------------------------------------------------------------------
+    def push(self, batch: PushBatch, now_ns: int | None = None) -> PushAnswer:
+        """Store a robot's batch (BatchError: refused, nothing stored)."""
+        for problem in (robot_id_error(batch.robot_id), ledger_id_error(batch.ledger_id)):
+            if problem:
+                raise BatchError("invalid-request", problem)
+        records = tuple(batch.records)
+        if records and batch.head_seq < records[-1].seq:
+            raise BatchError("invalid-request", f"head_seq {batch.head_seq} is before the "
+                             f"batch's last record {records[-1].seq}")
+        check_batch(records, batch.robot_id, batch.ledger_id)
+        chain = self._chain(batch.ledger_id) or self._enter(batch, now_ns)
+        if chain.robot_id != batch.robot_id:
+            raise BatchError("robot-differs", f"log {batch.ledger_id} belongs to robot "
+                             f"{chain.robot_id}, not {batch.robot_id}", last_seq=chain.last_seq)
+        with self.log(chain) as ledger:
+            done: Imported = ledger._writer.submit(Import(records))
+            last_recorded = max([r.recorded_at_ns for r in records if r.seq <= done.last_seq],
+                                default=0)
+        if done.refused is not None:
+            self._contact(chain, batch, done, 0, now_ns)
+            raise BatchError(done.refused, done.message, done.seq, done.last_seq)
+        self._contact(chain, batch, done, last_recorded, now_ns)
+        return PushAnswer(batch.robot_id, batch.ledger_id, done.last_seq, done.last_hash,
+                          done.stored, done.ignored)
+
+    def _enter(self, batch: PushBatch, now_ns: int | None) -> fleet_log.Chain:
+        with self.central._db.writing(lock_key=directory_lock_key(batch.ledger_id)) as conn:
+            found = fleet_log.chain_of(conn, batch.ledger_id)
+            if found is None:
+                now = time.time_ns() if now_ns is None else now_ns
+                found = fleet_log.new_chain(conn, batch.ledger_id, batch.robot_id, now)
+        return found
+
+    def _contact(self, chain: fleet_log.Chain, batch: PushBatch, done: Imported,
+                 last_recorded_ns: int, now_ns: int | None) -> None:
+        """Note the robot's contact and how far the log now goes (after the log's own
+        commit: should this fail, the next push puts it right)."""
+        with self.central._db.writing(lock_key=directory_lock_key(batch.ledger_id)) as conn:
+            current = fleet_log.chain_of(conn, batch.ledger_id) or chain
+            fleet_log.record_contact(
+                conn, current, last_seq=done.last_seq, last_hash=done.last_hash,
+                head_seq=max(batch.head_seq, done.last_seq),
+                last_recorded_ns=max(last_recorded_ns, current.last_recorded_ns),
+                now_ns=time.time_ns() if now_ns is None else now_ns)
+
+    # -- reads -------------------------------------------------------------------------------
+    def robots(self, now_ns: int | None = None, robot_id: str | None = None
+               ) -> list[ChainStatus]:
+        """Every robot log the central holds (of one robot), with its lag at ``now``."""
+        now = time.time_ns() if now_ns is None else now_ns
+        return [ChainStatus(
+            c.robot_id, c.ledger_id, c.last_seq, c.last_hash, c.last_seq,
+            from_ns(c.last_contact_ns),
+            round(max(0, now - (c.complete_until_ns or c.first_contact_ns)) / NS_PER_SECOND, 3),
+            from_ns(c.complete_until_ns) if c.complete_until_ns else None,
+            max(0, c.head_seq - c.last_seq)) for c in self.chains(robot_id)]
+
+    def chain_hashes(self, ledger_id: str, after_seq: int, limit: int
+                     ) -> tuple[str, list[tuple[int, str]], int]:
+        """(robot_id, a page of (seq, hash) after ``after_seq``, the last seq held) of one
+        log; BatchError ``unknown-ledger`` when the central holds nothing of it."""
+        problem = ledger_id_error(ledger_id)
+        if problem:
+            raise BatchError("invalid-request", problem)
+        chain = self._chain(ledger_id)
+        if chain is None:
+            raise BatchError("unknown-ledger", f"the central holds no log {ledger_id}")
+        with self.log(chain) as ledger:
+            page = [(r.seq, r.hash) for r in audit.export_history(
+                ledger, from_seq=after_seq + 1, limit=max(1, min(limit, MAX_HASH_PAGE)))]
+            return chain.robot_id, page, ledger.last_seq
+
+    def chains_of(self, robot_id: str, ledger_id: str | None = None) -> list[fleet_log.Chain]:
+        """The logs of one robot (the one with ``ledger_id``); InvalidInputError naming what
+        the central holds when there is none."""
+        problem = robot_id_error(robot_id) or (None if ledger_id is None
+                                               else ledger_id_error(ledger_id))
+        if problem:
+            raise InvalidInputError(problem)
+        found = [c for c in self.chains(robot_id)
+                 if ledger_id is None or c.ledger_id == ledger_id]
+        if not found:
+            known = sorted({c.robot_id for c in self.chains()})
+            what = f"robot {robot_id}" + ("" if ledger_id is None else f" log {ledger_id}")
+            raise InvalidInputError(
+                f"the central holds no {what}; it holds "
+                + (", ".join(known[:20]) + ("…" if len(known) > 20 else "") if known
+                   else "no robot logs (robots push with `faultledger sync`)"))
+        return found
+
+    def history(self, robot_id: str, ledger_id: str | None = None, *,
+                code: str | None = None, since: datetime | int | None = None,
+                until: datetime | int | None = None, source: str | None = None,
+                kinds: Iterable[str] = (), limit: int | None = None,
+                codes: Sequence[str] | None = None, from_seq: int | None = None,
+                to_seq: int | None = None) -> Iterator[tuple[LedgerIdentity, StoredRecord]]:
+        """A robot's records as the central holds them, log after log (oldest first), each
+        exactly as the robot's own history export gives it, with the log's identity. The
+        filters are ``history``'s; ``limit`` applies per log."""
+        for chain in self.chains_of(robot_id, ledger_id):
+            identity = LedgerIdentity(chain.robot_id, chain.ledger_id)
+            with self.log(chain) as ledger:
+                rows = audit.export_history(ledger, code, since, until, source, kinds, limit,
+                                            codes=codes, from_seq=from_seq, to_seq=to_seq)
+                for row in rows:
+                    yield identity, row
+
+    def verify(self, robot_id: str, ledger_id: str | None = None) -> list[ChainCheck]:
+        """``verify`` of every log of a robot as the central holds it: the hash chain, the
+        head, and the projections and statistics equal to a full replay."""
+        checks = []
+        for chain in self.chains_of(robot_id, ledger_id):
+            with self.log(chain) as ledger:
+                report = ledger.verify()
+            if report.ok and report.head_seq < chain.last_seq:
+                report = VerifyReport(False, report.records, report.head_seq,
+                                      report.head_hash, report.head_seq + 1,
+                                      [f"the log ends at seq {report.head_seq} but the central "
+                                       f"recorded holding up to seq {chain.last_seq}: records "
+                                       "were deleted"])
+            checks.append(ChainCheck(chain.robot_id, chain.ledger_id, report))
+        return checks

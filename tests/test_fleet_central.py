@@ -1,0 +1,187 @@
+"""The central's side of store and forward (docs/fleet.md), through the service API: a robot's
+records, read verbatim from a real robot log (SQLite), pushed into a central log (SQLite, or a
+real PostgreSQL with ``--backend postgresql``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import sqlite3
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from sqlalchemy import create_engine, text
+
+from faultledger import FaultLedger, Policy
+from faultledger.domain.fleet import BatchError, PushedRecord
+from faultledger.errors import InvalidInputError
+from faultledger.service import fleet
+from faultledger.service.audit import export_history
+from faultledger.store import fleet_log
+
+
+def robot_log(path: Path, robot_id: str, reports: int) -> str:
+    url = f"sqlite:///{path}"
+    with FaultLedger.open(url, policy=Policy(), robot_id=robot_id, background=False) as robot:
+        for n in range(reports):
+            robot.report(f"CODE_{n % 7}", "FAILED" if n % 3 else "PASSED", 1, f"d{n}",
+                         f"/{robot_id}")
+    return url
+
+
+def records_of(url: str, after: int = 0) -> tuple[str, str, list[PushedRecord]]:
+    with FaultLedger.open(url) as robot:
+        identity = robot.identity
+        assert identity is not None
+        rows = list(export_history(robot, from_seq=after + 1))
+    return identity.robot_id, identity.ledger_id, [
+        PushedRecord(r.seq, r.event_id, r.kind, r.fault_code, r.source_id, r.payload_json,
+                     r.occurred_at_ns, r.recorded_at_ns, r.schema_version, r.hash,
+                     r.prev_hash or "") for r in rows]
+
+
+@pytest.fixture
+def central(db_url: str) -> Iterator[fleet.Fleet]:
+    with FaultLedger.open(db_url, policy=Policy(), robot_id="central",
+                          background=False) as ledger, fleet.Fleet(ledger) as robot_logs:
+        yield robot_logs
+
+
+def batches(records: list[PushedRecord], size: int) -> Iterator[list[PushedRecord]]:
+    for start in range(0, len(records), size):
+        yield records[start:start + size]
+
+
+def test_a_pushed_log_is_held_record_for_record_and_hash_for_hash(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    robot_id, ledger_id, records = records_of(robot_log(tmp_path / "a.db", "robot-a", 250))
+    answers = [central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, part))
+               for part in batches(records, 100)]
+    assert [a.stored for a in answers] == [100, 100, len(records) - 200]
+    assert answers[-1].last_seq == records[-1].seq and answers[-1].last_hash == records[-1].hash
+    held_robot, page, last = central.chain_hashes(ledger_id, 0, 10_000)
+    assert held_robot == robot_id and last == records[-1].seq
+    assert page == [(r.seq, r.hash) for r in records]
+    [status] = central.robots()
+    assert (status.robot_id, status.ledger_id, status.records) == (robot_id, ledger_id,
+                                                                   len(records))
+
+
+def test_a_batch_sent_again_is_ignored_and_a_gap_is_refused_with_the_held_seq(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    robot_id, ledger_id, records = records_of(robot_log(tmp_path / "a.db", "robot-a", 40))
+    head = records[-1].seq
+    central.push(fleet.PushBatch(robot_id, ledger_id, head, records[:20]))
+    again = central.push(fleet.PushBatch(robot_id, ledger_id, head, records[10:30]))
+    assert (again.stored, again.ignored, again.last_seq) == (10, 10, 30)
+    with pytest.raises(BatchError) as gap:
+        central.push(fleet.PushBatch(robot_id, ledger_id, head, records[35:]))
+    assert gap.value.code == "chain-gap" and gap.value.last_seq == 30
+    empty = central.push(fleet.PushBatch(robot_id, ledger_id, head, []))
+    assert (empty.last_seq, empty.stored) == (30, 0)
+
+
+def test_an_edited_record_is_refused_by_seq_and_nothing_is_stored(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    path = tmp_path / "a.db"
+    url = robot_log(path, "robot-a", 30)
+    robot_id, ledger_id, records = records_of(url)
+    with sqlite3.connect(path) as conn:  # an edit on the robot before it was pushed
+        conn.execute("UPDATE events SET payload = replace(payload, 'd17', 'dXX') "
+                     "WHERE payload LIKE '%d17%'")
+    _, _, edited = records_of(url)
+    bad = next(r for r in edited if "dXX" in r.payload)
+    with pytest.raises(BatchError) as refused:
+        central.push(fleet.PushBatch(robot_id, ledger_id, edited[-1].seq, edited))
+    assert refused.value.code == "broken-chain" and refused.value.seq == bad.seq
+    assert central.robots() == []
+    # Pushed first, edited later: the record the central holds differs.
+    central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records))
+    forged = dataclasses.replace(bad, hash=bad.computed_hash())
+    with pytest.raises(BatchError) as differs:
+        central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, [forged]))
+    assert differs.value.code == "record-differs" and differs.value.seq == bad.seq
+
+
+def test_a_replaced_robot_database_is_a_second_chain_and_another_robot_id_is_refused(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    first = records_of(robot_log(tmp_path / "a.db", "robot-a", 10))
+    second = records_of(robot_log(tmp_path / "a-new.db", "robot-a", 5))
+    for robot_id, ledger_id, records in (first, second):
+        central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records))
+    chains = central.robots()
+    assert [(c.robot_id, c.ledger_id, c.records) for c in chains] == [
+        ("robot-a", first[1], len(first[2])), ("robot-a", second[1], len(second[2]))]
+    _, ledger_id, records = first
+    with pytest.raises(BatchError) as other:
+        central.push(fleet.PushBatch("robot-b", ledger_id, records[-1].seq, records))
+    assert other.value.code == "robot-differs"
+
+
+def test_robots_pushing_concurrently_each_keep_their_whole_chain(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    logs = [records_of(robot_log(tmp_path / f"r{n}.db", f"robot-{n}", 120)) for n in range(4)]
+    errors: list[BaseException] = []
+
+    def push_all(robot_id: str, ledger_id: str, records: list[PushedRecord]) -> None:
+        try:
+            for part in batches(records, 7):
+                central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, part))
+        except BaseException as error:  # reported below
+            errors.append(error)
+
+    threads = [threading.Thread(target=push_all, args=log) for log in logs]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors == []
+    for _, ledger_id, records in logs:
+        assert central.chain_hashes(ledger_id, 0, 10_000)[1] == [
+            (r.seq, r.hash) for r in records]
+
+
+def test_lag_is_zero_when_caught_up_and_grows_while_the_robot_is_behind(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    robot_id, ledger_id, records = records_of(robot_log(tmp_path / "a.db", "robot-a", 20))
+    t0 = records[-1].recorded_at_ns + 10**9
+    central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records[:5]),
+               now_ns=t0)
+    [behind] = central.robots(now_ns=t0 + 60 * 10**9)
+    assert behind.lag_seconds >= 60
+    central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records[5:]),
+               now_ns=t0 + 61 * 10**9)
+    [caught_up] = central.robots(now_ns=t0 + 61 * 10**9)
+    assert caught_up.lag_seconds == 0
+
+
+def test_history_of_a_robot_equals_the_robots_own_export_and_verify_names_an_edit(
+        central: fleet.Fleet, db_url: str, tmp_path: Path) -> None:
+    url = robot_log(tmp_path / "a.db", "robot-a", 80)
+    robot_id, ledger_id, records = records_of(url)
+    central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records))
+    with FaultLedger.open(url) as robot:
+        own = list(export_history(robot))
+        own_failed = list(export_history(robot, kinds=["fault_reported"], codes=["CODE_[12]"],
+                                         from_seq=10))
+    held = list(central.history("robot-a"))
+    assert [row for _, row in held] == own
+    assert {identity for identity, _ in held} == {(robot_id, ledger_id)}
+    assert [row for _, row in central.history(
+        "robot-a", ledger_id, kinds=["fault_reported"], codes=["CODE_[12]"],
+        from_seq=10)] == own_failed
+    [check] = central.verify("robot-a")
+    assert check.report.ok and check.report.records == len(records)
+
+    [chain] = central.chains("robot-a")
+    engine = create_engine(fleet_log.chain_url(db_url, chain.chain_id))
+    with engine.begin() as conn:  # someone edits the central's copy
+        conn.execute(text("UPDATE events SET payload = replace(payload, 'd33', 'dXX') "
+                          "WHERE payload LIKE '%\"d33\"%'"))
+    engine.dispose()
+    bad = next(r.seq for r in records if '"d33"' in r.payload)
+    [check] = central.verify("robot-a")
+    assert not check.report.ok and check.report.first_bad_seq == bad
+    with pytest.raises(InvalidInputError, match="holds no robot robot-z; it holds robot-a"):
+        list(central.history("robot-z"))
