@@ -8,12 +8,15 @@ import dataclasses
 import sqlite3
 import threading
 from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
+from typing import Any
 
 import pytest
 from sqlalchemy import create_engine, text
 
 from faultledger import FaultLedger, Policy
+from faultledger.domain.clock import to_ns
 from faultledger.domain.fleet import BatchError, PushedRecord
 from faultledger.errors import InvalidInputError
 from faultledger.service import fleet
@@ -185,3 +188,88 @@ def test_history_of_a_robot_equals_the_robots_own_export_and_verify_names_an_edi
     assert not check.report.ok and check.report.first_bad_seq == bad
     with pytest.raises(InvalidInputError, match="holds no robot robot-z; it holds robot-a"):
         list(central.history("robot-z"))
+
+
+def timed_robot_log(path: Path, robot_id: str, seed: int, hours: int = 30) -> str:
+    """A robot log over ``hours`` hours of the past: reports, clears, goal outcomes."""
+    import random
+
+    rng = random.Random(seed)
+    url = f"sqlite:///{path}"
+    start = datetime(2026, 11, 20, 0, 0, tzinfo=UTC)
+    with FaultLedger.open(url, policy=Policy(confirmation_threshold=-2), robot_id=robot_id,
+                          background=False) as robot:
+        for n in range(hours * 12):
+            at = start + timedelta(minutes=5 * n + rng.randrange(5))
+            code = rng.choice(["HW_BASE_EMERGENCY_STOP", "NAV_STUCK", "LIDAR_TIMEOUT"])
+            roll = rng.random()
+            if roll < 0.08:
+                robot.clear(code, actor="test", at=at)
+            elif roll < 0.15:
+                robot.record_goal_outcome("/navigate", f"g{n}", rng.choice(
+                    ["ABORTED", "SUCCEEDED", "CANCELED"]), at=at)
+            else:
+                robot.report(code, "FAILED" if roll < 0.7 else "PASSED", 2, "", "/base", at=at)
+    return url
+
+
+def figures(row: Any) -> dict[str, Any]:
+    found = row.as_dict()
+    for name in ("robot", "line", "site", "ledger_id", "complete"):
+        found.pop(name, None)
+    return found
+
+
+def test_a_robots_statistics_at_the_central_equal_its_own_figure_for_figure(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    urls = {name: timed_robot_log(tmp_path / f"{name}.db", name, seed)
+            for seed, name in enumerate(["robot-a", "robot-b"])}
+    for url in urls.values():
+        robot_id, ledger_id, records = records_of(url)
+        central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records))
+    since, until = "2026-11-20T00:00:00+00:00", "2026-11-21T06:00:00+00:00"
+    as_of = datetime(2026, 11, 22, tzinfo=UTC)
+    own = {}
+    for name, url in urls.items():
+        with FaultLedger.open(url) as robot:
+            robot.calendar = central.central.calendar
+            own[name] = robot.stats("hour", since, until, as_of=as_of)
+            own_by_code = robot.stats("day", since, until, group_by=["code"], as_of=as_of)
+    at_central = central.stats("hour", since, until, group_by=["robot"], as_of=as_of)
+    for name in urls:
+        rows = [row for row in at_central if row.group["robot"] == name]
+        assert [figures(row) for row in rows] == [figures(row) for row in own[name]]
+        assert all(row.complete for row in rows)
+    assert [figures(r) for r in central.stats("day", since, until, group_by=["code"],
+                                              robot="robot-b", as_of=as_of)] == [
+        figures(r) for r in own_by_code]
+    # A line of both robots: counts add up, MTTR weighted by repairs.
+    line = central.stats("hour", since, until, group_by=["line"], as_of=as_of,
+                         labels={"robot-a": {"line": "L3"}, "robot-b": {"line": "L3"}})
+    assert {row.group["line"] for row in line} == {"L3"}
+    for row, a, b in zip(line, own["robot-a"], own["robot-b"], strict=True):
+        assert row.activations == a.activations + b.activations
+        assert row.estops == a.estops + b.estops
+        assert row.aborted_goals == a.aborted_goals + b.aborted_goals
+        if a.repairs + b.repairs:
+            expected = ((a.mttr_seconds or 0) * a.repairs + (b.mttr_seconds or 0) * b.repairs
+                        ) / (a.repairs + b.repairs)
+            assert row.mttr_seconds == pytest.approx(expected)
+
+
+def test_a_robot_that_pushed_part_of_its_log_has_provisional_periods(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    robot_id, ledger_id, records = records_of(robot_log(tmp_path / "a.db", "robot-a", 40))
+    cut = len(records) // 2
+    central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records[:cut]))
+    held_until = records[cut - 1].recorded_at_ns
+    now = datetime.now(UTC)
+    rows = central.stats("10min", now - timedelta(hours=1), now + timedelta(minutes=20),
+                         group_by=["robot"], as_of=now)
+    assert {row.complete for row in rows} == {True, False}
+    assert all(row.complete is (to_ns(row.period.end) <= held_until) for row in rows)
+    assert "complete" in rows[0].as_dict()
+    central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records[cut:]))
+    caught_up = central.stats("10min", now - timedelta(hours=1), now, group_by=["robot"],
+                              as_of=now)
+    assert all(row.complete for row in caught_up)

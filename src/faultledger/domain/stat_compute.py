@@ -353,7 +353,7 @@ def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
     start, end = bounds.starts[i], bounds.ends[i]
     length_ns = end - start
     seconds = length_ns / NS_PER_SECOND
-    counts = dict(zip(COUNT_METRICS, tally.counts, strict=True))
+    counts: dict[str, Any] = dict(zip(COUNT_METRICS, tally.counts, strict=True))
     confirmations = counts["confirmations"]
     flood_ns = 0
     flood_windows = 0
@@ -382,5 +382,9 @@ def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
         chattering_codes=chattering,
         stale_codes=tally.stale_count if tally.stale_count is not None else len(tally.stale),
         top10_share=top / confirmations if confirmations else None,
-        **dict(zip(GOAL_METRICS, tally.goals, strict=True)),
+        **_goal_figures(tally.goals),
     )
+
+
+def _goal_figures(goals: Sequence[int]) -> dict[str, Any]:
+    return dict(zip(GOAL_METRICS, goals, strict=True))

@@ -57,6 +57,9 @@ class StatsRow:
     aborted_goals: int = 0
     canceled_goals: int = 0
     succeeded_goals: int = 0
+    complete: bool | None = None
+    """At a fleet central: False while a robot in the row has not pushed past the period's
+    end (provisional: more records may come); None for a log's own statistics."""
 
     @property
     def period_seconds(self) -> float:
@@ -67,6 +70,8 @@ class StatsRow:
         figures = asdict(self)
         figures.pop("period")
         group = figures.pop("group")
+        if figures["complete"] is None:
+            figures.pop("complete")
         period = self.period
         return {
             "period": period.id,

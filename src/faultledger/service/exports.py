@@ -75,15 +75,17 @@ def write_csv(rows: Iterable[StoredRecord], out: TextIO,
     return count
 
 
-STATS_FIGURES = [f.name for f in fields(StatsRow) if f.name not in ("period", "group")]
+STATS_FIGURES = [f.name for f in fields(StatsRow)
+                 if f.name not in ("period", "group", "complete")]
 STATS_PERIOD_FIELDS = ["period", "period_name", "production_day", "start", "end"]
 
 
 def stats_csv(rows: Sequence[StatsRow], group_by: Sequence[str]) -> str:
     """Every field of ``StatsRow.as_dict``; empty cells for undefined figures."""
     out = io.StringIO()
-    writer = csv.DictWriter(out, fieldnames=[*STATS_PERIOD_FIELDS, *group_by, *STATS_FIGURES],
-                            lineterminator="\n")
+    fleet = ["complete"] if any(row.complete is not None for row in rows) else []
+    writer = csv.DictWriter(out, fieldnames=[*STATS_PERIOD_FIELDS, *group_by, *STATS_FIGURES,
+                                             *fleet], lineterminator="\n")
     writer.writeheader()
     for row in rows:
         writer.writerow(row.as_dict())

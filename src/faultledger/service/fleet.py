@@ -22,11 +22,11 @@ import hashlib
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
 from datetime import datetime
 
-from faultledger.domain.clock import NS_PER_SECOND, from_ns
+from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.fleet import (
     MAX_BATCH_RECORDS,
     BatchError,
@@ -35,9 +35,11 @@ from faultledger.domain.fleet import (
     ledger_id_error,
     robot_id_error,
 )
+from faultledger.domain.fleet_stats import FLEET_KEYS, merge
 from faultledger.domain.identity import LedgerIdentity
+from faultledger.domain.stat_rows import StatsRow
 from faultledger.errors import InvalidInputError
-from faultledger.service import audit
+from faultledger.service import audit, statistics
 from faultledger.service.ledger import FaultLedger
 from faultledger.service.results import VerifyReport
 from faultledger.service.writer import Import, Imported
@@ -286,6 +288,50 @@ class Fleet:
                                             codes=codes, from_seq=from_seq, to_seq=to_seq)
                 for row in rows:
                     yield identity, row
+
+    def stats(self, by: str = "shift", since: datetime | str | None = None,
+              until: datetime | str | None = None, codes: Sequence[str] | None = None,
+              group_by: Sequence[str] = (), *, robot: str | None = None,
+              labels: Mapping[str, Mapping[str, str]] | None = None,
+              as_of: datetime | None = None,
+              budget: statistics.StatsBudget | None = None) -> list[StatsRow]:
+        """Statistics of the robots' logs (of one ``robot``), with the central's calendar
+        and e-stop codes: per robot, line or site (``group_by`` robot/line/site, from the
+        config's ``fleet.robots`` labels) and the log's own keys. Every row says whether it
+        is ``complete``: False while a robot in it has not pushed past the period's end."""
+        wanted = (group_by,) if isinstance(group_by, str) else tuple(group_by)
+        fleet_keys = [key for key in wanted if key in FLEET_KEYS]
+        log_keys = [key for key in wanted if key not in FLEET_KEYS]
+        labels = labels or {}
+        chains = self.chains_of(robot) if robot is not None else self.chains()
+        several: dict[str, int] = {}
+        for chain in chains:
+            several[chain.robot_id] = several.get(chain.robot_id, 0) + 1
+        merged: dict[tuple[object, ...], list[StatsRow]] = {}
+        order: list[tuple[object, ...]] = []
+        for chain in chains:
+            with self.log(chain) as ledger:
+                ledger.estop_codes = self.central.estop_codes
+                rows = ledger.stats(by, since, until, codes, log_keys,
+                                    calendar=self.central.calendar, as_of=as_of, budget=budget)
+            robot_labels = labels.get(chain.robot_id, {})
+            fleet_group: dict[str, str | int] = {
+                "robot": chain.robot_id, "line": robot_labels.get("line", ""),
+                "site": robot_labels.get("site", "")}
+            for row in rows:
+                group = {**{k: fleet_group[k] for k in fleet_keys}, **row.group}
+                if "robot" in fleet_keys and several[chain.robot_id] > 1:
+                    group["ledger_id"] = chain.ledger_id  # a replaced database: never merged
+                done = (chain.complete_until_ns >= to_ns(row.period.end)
+                        if chain.complete_until_ns else False)
+                key = (row.period.id, row.period.start, *sorted(group.items()))
+                if key not in merged:
+                    merged[key] = []
+                    order.append(key)
+                merged[key].append(replace(row, group=group, complete=done))
+        found = [merge(merged[key], merged[key][0].group) for key in order]
+        found.sort(key=lambda row: (row.period.start, *(str(v) for v in row.group.values())))
+        return found
 
     def verify(self, robot_id: str, ledger_id: str | None = None) -> list[ChainCheck]:
         """``verify`` of every log of a robot as the central holds it: the hash chain, the
