@@ -22,7 +22,9 @@ import threading
 import time
 from pathlib import Path
 
-from faultledger import FaultLedger
+from sqlalchemy import create_engine, text
+
+from faultledger import FaultLedger, Policy
 
 WRITERS = 8
 LATE_WRITERS = 2
@@ -148,3 +150,38 @@ def test_eight_writers_some_killed_keep_one_gap_free_verified_log(db_url: str,
     stored = {r.event_id: r.seq for r in records}
     missing = {e: s for e, s in acknowledged.items() if stored.get(e) != s}
     assert missing == {}, f"{len(missing)} acknowledged reports missing or moved"
+
+
+OPENER = textwrap.dedent(
+    """
+    import sys
+    from faultledger import FaultLedger, Policy
+
+    with FaultLedger.open(sys.argv[1], policy=Policy(confirmation_threshold=-2)) as ledger:
+        result = ledger.report("AFTER_UPGRADE", "FAILED", 1, "", "/opener")
+        print("OK" if result.accepted else "X " + result.message, flush=True)
+    """
+)
+
+
+def test_processes_opening_a_log_whose_statistics_must_be_recomputed_all_open(
+        db_url: str, tmp_path: Path) -> None:
+    """After an upgrade that resets the statistics (as Alembic 0003 did), the first opens
+    recompute them from the log; six processes opening at once must all open and write,
+    and the tables must equal a full replay afterwards (once saved, never twice)."""
+    with FaultLedger.open(db_url, policy=Policy(confirmation_threshold=-2)) as ledger:
+        for n in range(300):
+            ledger.report(f"CODE_{n % 9}", "FAILED" if n % 4 else "PASSED", 1, "", "/setup")
+    engine = create_engine(db_url)
+    with engine.begin() as conn:  # what an upgrade that adds statistics leaves behind
+        conn.execute(text("UPDATE checkpoints SET seq = 0 WHERE name = 'statistics'"))
+    engine.dispose()
+    script = tmp_path / "opener.py"
+    script.write_text(OPENER)
+    runs = [subprocess.Popen([sys.executable, str(script), db_url], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True) for _ in range(6)]
+    answers = [run.communicate(timeout=TIMEOUT_S) for run in runs]
+    assert [out.strip() for out, _ in answers] == ["OK"] * 6, [err[-1500:] for _, err in answers]
+    with FaultLedger.open(db_url) as reader:
+        report = reader.verify()
+    assert report.ok, report.problems

@@ -49,6 +49,7 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
 
     Over one database, until Ctrl-C; docs/http.md.
     """
+    from faultledger.fleet.push import PusherThread
     from faultledger.http.server import HttpServer
 
     settings = settings_for(config)
@@ -58,18 +59,29 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
         ledger = open_ledger(ledger_config)
     except FaultLedgerError as error:
         fail(str(error))
+    pusher: PusherThread | None = None
     try:
         try:
             server = HttpServer(ledger, settings.http, ledger_config.calendar, listen,
                                 read_only=read_only)
         except FaultLedgerError as error:
             fail(str(error))
+        # The config's fleet: push this log to a central, as `sync --follow` does (a
+        # read-only server writes nothing, so it pushes nothing: its writer does).
+        try:
+            pusher = None if read_only else PusherThread.start_for(ledger, settings.fleet)
+        except FaultLedgerError as error:
+            fail(str(error))
         mode = " (read-only)" if read_only else ""
         typer.echo(printable(f"faultledger http ready{mode}: {server.url} db="
                              f"{describe(ledger_config.url)}; {server.access}; "
                              f"dashboard {server.url}, API {server.url}docs"))
+        if pusher is not None:
+            typer.echo(printable(pusher.describe))
         server.run()
     finally:
+        if pusher is not None:
+            pusher.stop()
         ledger.close()
 
 

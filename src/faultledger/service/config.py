@@ -132,6 +132,19 @@ class HttpSettings(BaseModel):
     per-minute sums cannot answer: with code or group_by)."""
 
 
+class FleetSettings(BaseModel):
+    """This robot's push to a fleet central (docs/fleet.md, "Robot side"): `serve` and `http`
+    keep the central caught up with the log on a thread of their own, like `sync --follow`."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    central: str = Field(pattern=r"^https?://[^\s/?#]+[^\s?#]*$", max_length=2048)
+    """The central's base URL (http://HOST:PORT or https://…, a path allowed)."""
+    token_file: Path
+    """The file holding this robot's token (what `token create --role robot` printed on the
+    central); relative to the working directory."""
+
+
 class Settings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -153,6 +166,8 @@ class Settings(BaseModel):
     the ``estops`` figure every statistics row, report and the dashboard headline."""
     anchors: AnchorSettings = Field(default_factory=AnchorSettings)
     http: HttpSettings = Field(default_factory=HttpSettings)
+    fleet: FleetSettings | None = None
+    """Push this robot's log to a central while serving; None: no push (docs/fleet.md)."""
 
     @field_validator("robot_id")
     @classmethod

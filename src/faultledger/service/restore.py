@@ -89,22 +89,38 @@ def restore(db: Database) -> tuple[Projector, int, int]:
         )
         stored_seq = event_log.head(conn)[0]
     if tracks is None:
-        projector.stats = catch_up_statistics(db, checkpoint.seq, stats_seq)
+        try:
+            projector.stats = catch_up_statistics(db, checkpoint.seq, stats_seq)
+        except _Moved:
+            return restore(db)
     if stored_seq < checkpoint.seq:
         log.warning("the log ends at seq %d but the projections include seq %d: records were "
                     "deleted; writes are refused (run `faultledger verify`)",
                     stored_seq, checkpoint.seq)
     replayed = max(0, stored_seq - checkpoint.seq)
     if replayed:
-        projector = persist_tail(db, projector)
+        try:
+            projector = persist_tail(db, projector)
+        except _Moved:  # another process saved them first: start from what it saved
+            return restore(db)
     return projector, stored_seq, replayed
 
 
+class _Moved(Exception):
+    """The projections moved between reading them and taking the write lock."""
+
+
 def persist_tail(db: Database, projector: Projector) -> Projector:
-    """Bring lagging projections up to the log (in memory, and on disk when writable)."""
+    """Bring lagging projections up to the log (in memory, and on disk when writable).
+
+    Several processes opening one log at once all find the same lagging projections; the
+    first to take the write lock saves them, the others (``_Moved``) restore again from what
+    it saved, rather than saving the same rows twice."""
     identified = projector.identity is not None
     try:
         with db.writing() as conn:
+            if projections.load_checkpoint(conn).seq != projector.seq:
+                raise _Moved
             projector.stage()
             found = apply_all(projector, event_log.read(conn, after_seq=projector.seq))
             projections.save(conn, projector.staged_faults(), found,
@@ -134,6 +150,8 @@ def catch_up_statistics(db: Database, upto: int, stats_seq: int) -> StatsFold:
     log.info("statistics include seq %d of %d: computing them from the log", stats_seq, upto)
     try:
         with db.writing() as conn:
+            if stat_tables.checkpoint_seq(conn) != stats_seq:
+                raise _Moved  # another process did it: restore from what it saved
             stat_tables.replace_all(conn, output, upto)
     except FaultLedgerError as error:
         log.warning("statistics cannot be saved (%s); they are incomplete until a writer "
