@@ -273,3 +273,16 @@ def test_a_robot_that_pushed_part_of_its_log_has_provisional_periods(
     caught_up = central.stats("10min", now - timedelta(hours=1), now, group_by=["robot"],
                               as_of=now)
     assert all(row.complete for row in caught_up)
+
+
+def test_faults_per_robot_are_each_robots_own_list(central: fleet.Fleet, tmp_path: Path) -> None:
+    urls = [robot_log(tmp_path / f"{n}.db", f"robot-{n}", 25 + 10 * n) for n in range(2)]
+    for url in urls:
+        robot_id, ledger_id, records = records_of(url)
+        central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records))
+    for n, url in enumerate(urls):
+        with FaultLedger.open(url) as robot:
+            own = robot.list_faults()
+        held = central.faults(f"robot-{n}")
+        assert [item.fault for item in held] == own and own
+    assert {item.robot_id for item in central.faults()} == {"robot-0", "robot-1"}

@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 from datetime import datetime
 
 from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
+from faultledger.domain.fault import Fault
 from faultledger.domain.fleet import (
     MAX_BATCH_RECORDS,
     BatchError,
@@ -47,7 +48,7 @@ from faultledger.store import fleet_log
 from faultledger.store.event_log import StoredRecord
 
 __all__ = ["MAX_BATCH_RECORDS", "MAX_HASH_PAGE", "ChainStatus", "Fleet", "PushAnswer",
-           "PushBatch"]
+           "PushBatch", "RobotFault"]
 
 MAX_HASH_PAGE = 10_000
 OPEN_LOGS = 32
@@ -88,6 +89,13 @@ class ChainStatus:
     """The central holds every record the robot wrote up to here (None: nothing yet)."""
     lag_records: int
     """Records the robot had and the central lacked at the robot's last contact."""
+
+
+@dataclass(frozen=True, slots=True)
+class RobotFault:
+    robot_id: str
+    ledger_id: str
+    fault: Fault
 
 
 @dataclass(frozen=True, slots=True)
@@ -288,6 +296,19 @@ class Fleet:
                                             codes=codes, from_seq=from_seq, to_seq=to_seq)
                 for row in rows:
                     yield identity, row
+
+    def faults(self, robot_id: str | None = None, statuses: Iterable[str] = (),
+               severity: int | None = None) -> list[RobotFault]:
+        """Faults per (robot, fault code), as each robot's log gives them (``list`` on the
+        robot), of every robot or one; a robot with a replaced database shows the faults of
+        each of its logs (``ledger_id`` tells them apart)."""
+        chains = self.chains_of(robot_id) if robot_id is not None else self.chains()
+        found: list[RobotFault] = []
+        for chain in chains:
+            with self.log(chain) as ledger:
+                found.extend(RobotFault(chain.robot_id, chain.ledger_id, fault)
+                             for fault in ledger.list_faults(statuses, severity))
+        return found
 
     def stats(self, by: str = "shift", since: datetime | str | None = None,
               until: datetime | str | None = None, codes: Sequence[str] | None = None,
