@@ -27,6 +27,9 @@ class Context:
     """The pool statistics, history, state-at and shift reports are computed in."""
     fleet: Fleet | None = None
     """The robot logs this server holds as a fleet central (made by the app)."""
+    fleet_labels: dict[str, dict[str, str]] = field(default_factory=dict)
+    """Per robot_id its ``line`` and ``site`` (the config's ``fleet.robots``): what
+    ``group_by=line|site`` groups by."""
     pushes: HeavyReads = field(default_factory=lambda: HeavyReads(
         PUSH_SLOTS, PUSH_QUEUE, PUSH_WAIT_SEC, what="robot log batches",
         settings="{slots} at a time, {queue} waiting"))
