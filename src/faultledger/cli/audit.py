@@ -21,6 +21,14 @@ import typer
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
 from faultledger.cli import render
+from faultledger.cli.fleet import (
+    CentralOption,
+    TokenFileOption,
+    central_json,
+    central_line,
+    check_central,
+    with_central,
+)
 from faultledger.cli.options import (
     TIME_HELP,
     ConfigOption,
@@ -42,6 +50,7 @@ from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.integrity import GENESIS_HASH
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.errors import FaultLedgerError
+from faultledger.fleet.check import CentralCheck
 from faultledger.service.anchors import (
     AnchorCheck,
     load_public_key,
@@ -169,6 +178,8 @@ def verify(
         "--public-key", metavar="FILE",
         help="The trusted Ed25519 public key (PEM) anchors must be signed "
         "with (default: the config's anchors.public_key).")] = None,
+    central: CentralOption = None,
+    token_file: TokenFileOption = None,
     as_json: JsonOption = False,
     shifts: ShiftsOption = None,
     db: DbOption = None,
@@ -178,7 +189,8 @@ def verify(
 
     For the whole log, also that the projections equal a full replay and SQLite's integrity
     check passes; with a range, only that segment, from the stored hash of the record before
-    it. With anchors, also that the log still holds what they signed.
+    it. With anchors, also that the log still holds what they signed. With --central, also
+    that every record a fleet central holds of this log is in it, unchanged.
     """
     if (since is not None or until is not None) and (from_seq is not None or to_seq is not None):
         _fail("give a seq range (--from-seq/--to-seq) or a time range (--since/--until), "
@@ -186,6 +198,10 @@ def verify(
     _check_seq_range(from_seq, to_seq)
     anchor_paths, trusted = _anchor_inputs(anchor_file, public_key, config)
     matched: list[AnchorCheck] = []
+    if token_file is not None and central is None:
+        _fail("--token-file needs --central URL")
+    settings = load_settings(config_path(config)) if central is not None else None
+    witness: CentralCheck | None = None
     setup = prepare(db, config, shifts=shifts)
     first_time = parse_time(since, "--since", setup.calendar)
     last_time = parse_time(until, "--until", setup.calendar, upper=True)
@@ -200,6 +216,9 @@ def verify(
         if trusted is not None:
             anchored = verify_anchors(ledger, anchor_paths, trusted)
             report_, matched = with_anchors(report_, anchored), anchored.matched
+        if settings is not None:
+            witness = check_central(ledger, central, token_file, settings)
+            report_ = with_central(report_, witness)
     if as_json:
         data: dict[str, Any] = {
             "ok": report_.ok, "records": report_.records, "head_seq": report_.head_seq,
@@ -215,6 +234,8 @@ def verify(
                                 "hash": m.anchor.hash, "key_id": m.anchor.key_id,
                                 "anchored_at": iso_ns(m.anchor.anchored_at_ns)}
                                for m in matched]
+        if witness is not None:
+            data["central"] = central_json(witness)
         typer.echo(json.dumps(data, indent=2))
     elif report_.ok and not ranged:
         render.say(f"OK: {report_.records} records, chain intact, projections "
@@ -239,6 +260,8 @@ def verify(
                        f"(made {render.zoned(from_ns(m.anchor.anchored_at_ns), setup.calendar)}"
                        f", key "
                        f"{m.anchor.key_id}) matches")
+        if witness is not None:
+            render.say(central_line(witness))
     if not report_.ok:
         raise typer.Exit(1)
 

@@ -13,6 +13,7 @@ import typer
 
 from faultledger.cli import anchor as anchor_commands
 from faultledger.cli import audit, render
+from faultledger.cli import fleet as fleet_commands
 from faultledger.cli import stats as stats_commands
 from faultledger.cli import web as web_commands
 from faultledger.cli.options import (
@@ -237,6 +238,8 @@ stats_commands.register(app)
 # anchor (export, keygen): signed anchors of the log head, in cli/anchor.py.
 anchor_commands.register(app)
 web_commands.register(app)
+# sync: push this robot's log to a fleet central, in cli/fleet.py.
+fleet_commands.register(app)
 
 
 @app.command()

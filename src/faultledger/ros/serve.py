@@ -25,6 +25,7 @@ from rclpy.utilities import (
 
 from faultledger.domain.text import printable
 from faultledger.errors import ConfigError
+from faultledger.fleet.push import PusherThread
 from faultledger.http.server import HttpServer
 from faultledger.ros.bridges.runner import RunningBridge, settings_from, start_bridge
 from faultledger.ros.dds_profile import use_manager_profile
@@ -255,6 +256,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
     bridges: list[RunningBridge] = []
     anchors: AnchorScheduler | None = None
     web: HttpServer | None = None
+    pusher: PusherThread | None = None
     executor = make_executor()
     try:
         node.declare_parameter("database_path", "")
@@ -275,6 +277,9 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
             if entry.get("enabled", False) and not follower:
                 bridges.append(start_bridge(name, settings_from(entry), executor,
                                             manager=node.get_fully_qualified_name()))
+        # The config's fleet: push this log to a central on a thread of its own, as `sync
+        # --follow` does; a follower pushes nothing (the manager it follows does).
+        pusher = None if follower else PusherThread.start_for(ledger, settings.fleet)
         if http_listen is not None:
             # The same ledger: one writer for ROS and HTTP (docs/http.md).
             web = HttpServer(ledger, settings.http, config.calendar, http_listen,
@@ -290,6 +295,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
         if web is not None:
             print(f"http ready: dashboard {web.url} API {web.url}docs; {web.access}",
                   flush=True)
+        if pusher is not None:
+            print(pusher.describe, flush=True)
         node.get_logger().info(
             f"serving {node.get_fully_qualified_name()}{mode} on {describe(url)}: restored "
             f"{restored.faults} faults from {restored.events} events")
@@ -297,6 +304,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
         if manager is not None:
             drain_reads(executor, manager)
     finally:
+        if pusher is not None:
+            pusher.stop()
         if web is not None:
             web.stop()
         for bridge in bridges:
