@@ -214,7 +214,7 @@ def timed_robot_log(path: Path, robot_id: str, seed: int, hours: int = 30) -> st
 
 
 def figures(row: Any) -> dict[str, Any]:
-    found = row.as_dict()
+    found: dict[str, Any] = row.as_dict()
     for name in ("robot", "line", "site", "ledger_id", "complete"):
         found.pop(name, None)
     return found

@@ -15,9 +15,10 @@ from sse_starlette.sse import SendTimeoutError
 from starlette.types import Message, Receive, Scope, Send
 
 from faultledger.domain.fault import Fault
+from faultledger.domain.fleet import robot_id_error
 from faultledger.domain.types import FaultStatus
 from faultledger.domain.validation import MAX_INTEGER, shown
-from faultledger.errors import Reason
+from faultledger.errors import InvalidInputError, Reason
 from faultledger.http import medkit
 from faultledger.http.context import Context
 from faultledger.http.errors import ApiError
@@ -47,6 +48,30 @@ def statuses(status: str | None) -> tuple[FaultStatus, ...]:
                        parameters={"allowed_values": medkit.ALLOWED_STATUS_VALUES,
                                    "parameter": "status", "value": status})
     return found
+
+
+RobotQuery = Annotated[str | None, Query(
+    description="a robot's faults as this fleet central holds its log(s); each item adds "
+    "robot_id and ledger_id")]
+
+
+def robot_faults(context: Context, robot: str, wanted: tuple[FaultStatus, ...]) -> Response:
+    """The list of a robot's log(s) at a fleet central, each item naming its log (a robot
+    whose database was replaced has two). A robot the central holds nothing of is 404 naming
+    the robots it does hold, so a mistyped name is seen at once rather than as no faults."""
+    problem = robot_id_error(robot)
+    if problem is not None:
+        raise ApiError(Reason.INVALID, f"robot: {problem}", parameters={"parameter": "robot"})
+    try:  # the robot's name is valid, so the only refusal left is a robot not held
+        held = context.robot_logs().faults(robot, [status.value for status in wanted])
+    except InvalidInputError as error:
+        raise ApiError(Reason.NOT_FOUND, str(error), parameters={"robot": robot}) from None
+    # Each log's faults by fault_code (as the central's own list), the logs oldest first.
+    answer = medkit.fault_list([item.fault for item in held])
+    for entry, item in zip(answer["items"], held, strict=True):
+        entry["robot_id"], entry["ledger_id"] = item.robot_id, item.ledger_id
+    return Response(json.dumps(answer, separators=(",", ":")).encode(),
+                    media_type="application/json", headers={"Cache-Control": "no-cache"})
 
 
 def writable(context: Context) -> None:
@@ -168,8 +193,11 @@ def router(context: Context) -> APIRouter:
     @api.get("/faults", summary="Faults by medkit status group",
              response_model=None, responses={200: {"content": {"application/json": {}}}})
     def list_faults(request: Request, status: StatusQuery = None, include_muted: bool = False,
-                    include_clusters: bool = False, _: Principal = read) -> Response:
+                    include_clusters: bool = False, robot: RobotQuery = None,
+                    _: Principal = read) -> Response:
         wanted = statuses(status)
+        if robot is not None:
+            return robot_faults(context, robot, wanted)
         seq = ledger.last_seq
         etag = f'"{seq}-{status or "default"}"'
         if request.headers.get("if-none-match") == etag:

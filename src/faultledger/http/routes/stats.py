@@ -5,19 +5,25 @@ stats --json`) and ``GET /api/v1/shift-report`` (the report of `faultledger repo
 from __future__ import annotations
 
 from collections.abc import Iterator
-from datetime import datetime
+from datetime import UTC, datetime
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Query
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
+from faultledger.domain.fleet import robot_id_error
+from faultledger.domain.fleet_stats import FLEET_KEYS
 from faultledger.domain.periods import PERIOD_KINDS
 from faultledger.domain.stat_rows import GROUP_KEYS, StatsRow
-from faultledger.errors import InvalidInputError
+from faultledger.domain.validation import shown
+from faultledger.errors import InvalidInputError, Reason
 from faultledger.http.context import Context
+from faultledger.http.errors import ApiError
 from faultledger.http.heavy import SlotResponse, json_bytes, json_items
 from faultledger.service import times
 from faultledger.service.exports import stats_csv
+from faultledger.service.fleet import Fleet
 from faultledger.service.statistics import StatsBudget
 from faultledger.service.tokens import Permission, Principal
 
@@ -30,6 +36,47 @@ def csv_chunks(rows: list[StatsRow], groups: list[str]) -> Iterator[bytes]:
     for start in range(0, max(len(rows), 1), CSV_CHUNK):
         text = stats_csv(rows[start:start + CSV_CHUNK], groups)
         yield (text if start == 0 else text.split("\n", 1)[1]).encode()
+
+
+ALL_KEYS = (*GROUP_KEYS, *FLEET_KEYS)
+
+
+def check_fleet_groups(groups: list[str]) -> None:
+    """Refuse unknown or repeated group keys naming every key a central groups by (the log's
+    own keys are checked again by the log's ``stats``)."""
+    for key in groups:
+        if key not in ALL_KEYS or groups.count(key) > 1:
+            raise InvalidInputError(f"group_by takes distinct names from {', '.join(ALL_KEYS)}"
+                                    f", got {shown(groups)}")
+
+
+def held_logs(fleet: Fleet, robot: str | None) -> int:
+    """How many logs a fleet query reads: a robot the central holds nothing of is 404 naming the
+    robots it holds (an invalid name stays 400)."""
+    if robot is None:
+        return len(fleet.chains())
+    problem = robot_id_error(robot)
+    if problem is not None:
+        raise InvalidInputError(f"robot: {problem}")
+    try:
+        return len(fleet.chains_of(robot))
+    except InvalidInputError as error:
+        raise ApiError(Reason.NOT_FOUND, str(error), parameters={"robot": robot}) from None
+
+
+def shared_budget(budget: StatsBudget, logs: int) -> StatsBudget:
+    """One request's limits shared by the robot logs it reads (each log's stats checks its
+    own share), so a fleet query does no more work and holds no more rows than one log's."""
+    if logs <= 1:
+        return budget
+    return StatsBudget(max(1, budget.rows // logs), max(1, budget.records // logs),
+                       f"{budget.rows_setting} {budget.rows:,} shared by {logs} robot logs",
+                       f"{budget.records_setting} {budget.records:,} shared by {logs} robot "
+                       "logs")
+
+
+def iso(moment: datetime) -> str:
+    return moment.astimezone(UTC).isoformat().replace("+00:00", "Z")
 
 
 def router(context: Context) -> APIRouter:
@@ -57,16 +104,21 @@ def router(context: Context) -> APIRouter:
         code: Annotated[list[str] | None, Query(description="fault code glob (repeatable)")
                         ] = None,
         group_by: Annotated[list[str] | None, Query(
-            description=f"{', '.join(GROUP_KEYS)} (repeatable)")] = None,
+            description=f"{', '.join(ALL_KEYS)} (repeatable; robot, line and site: the "
+            "robot logs of a fleet central)")] = None,
         as_of: Annotated[str | None, Query(
             description="the moment open episodes end at (default now)")] = None,
         format: Annotated[str, Query(pattern="^(json|csv)$")] = "json",
+        robot: Annotated[str | None, Query(
+            description="one robot's log(s) as this fleet central holds them")] = None,
         _: Principal = read,
     ) -> Response:
         groups = group_by or []
         start, end = moment(since, "since"), times.parse_time(until, "until", context.calendar,
                                                                upper=True)
         at = moment(as_of, "as_of")
+        if robot is not None or any(key in FLEET_KEYS for key in groups):
+            return await fleet_stats(by, start, end, code, groups, at, format, robot)
 
         def produce() -> Iterator[bytes]:
             # In the heavy pool: at most http.max_stats_rows rows and max_stats_records
@@ -76,6 +128,31 @@ def router(context: Context) -> APIRouter:
             if format == "csv":
                 return csv_chunks(rows, groups)
             return json_items(rows, StatsRow.as_dict)
+
+        return SlotResponse(context.heavy, produce,
+                            "text/csv" if format == "csv" else "application/json")
+
+    async def fleet_stats(by: str, start: datetime | None, end: datetime | None,
+                          code: list[str] | None, groups: list[str], at: datetime | None,
+                          format: str, robot: str | None) -> Response:
+        """The robot logs' statistics (Fleet.stats), in the same pool as any statistics.
+        Every log's periods end at one ``as_of``, so the rows of one period line up and say
+        when they were counted up to (``as_of`` beside the items)."""
+        check_fleet_groups(groups)
+        fleet = context.robot_logs()
+        logs = await run_in_threadpool(held_logs, fleet, robot)
+        at = at or datetime.now(UTC)
+        shared = shared_budget(budget, logs)
+
+        def produce() -> Iterator[bytes]:
+            rows = fleet.stats(by, start, end, code, groups, robot=robot,
+                               labels=context.fleet_labels, as_of=at, budget=shared)
+            if format == "csv":
+                # A robot with a replaced database has a row per log: ledger_id tells them apart.
+                keys = [*groups, *(["ledger_id"] if any("ledger_id" in row.group
+                                                        for row in rows) else [])]
+                return csv_chunks(rows, keys)
+            return json_items(rows, StatsRow.as_dict, {"as_of": iso(at)})
 
         return SlotResponse(context.heavy, produce,
                             "text/csv" if format == "csv" else "application/json")
