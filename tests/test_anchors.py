@@ -29,7 +29,7 @@ from faultledger.domain.integrity import canonical_json, record_hash
 from faultledger.errors import ConfigError
 from faultledger.service import anchors
 from faultledger.service.config import load_settings
-from tests.test_tamper import CLI, build_log, tamper
+from tests.test_tamper import CLI, LENGTH, build_log, tamper
 
 T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 
@@ -127,7 +127,7 @@ def append_reports(db: Path, count: int) -> int:
 @pytest.fixture
 def db(tmp_path: Path) -> Path:
     path = tmp_path / "faults.db"
-    assert build_log(path) == 13
+    assert build_log(path) == LENGTH
     return path
 
 
@@ -154,7 +154,7 @@ def test_keygen_export_and_verify_an_untouched_log(tmp_path: Path, db: Path) -> 
     seq, digest = head(db)
     (recorded,) = stored(db, "SELECT recorded_at_ns FROM events WHERE seq = ?", seq)[0]
     assert {k: document[k] for k in ("format", "seq", "hash", "recorded_at_ns", "key_id")} == {
-        "format": "faultledger-anchor/1", "seq": 13, "hash": digest, "recorded_at_ns": recorded,
+        "format": "faultledger-anchor/1", "seq": LENGTH, "hash": digest, "recorded_at_ns": recorded,
         "key_id": anchors.key_id(trusted)}
     assert document["recorded_at"].startswith(
         datetime.fromtimestamp(int(str(recorded)) // 10**9, tz=UTC).strftime("%Y-%m-%dT%H:%M:%S"))
@@ -162,17 +162,17 @@ def test_keygen_export_and_verify_an_untouched_log(tmp_path: Path, db: Path) -> 
     signature = base64.b64decode(document.pop("signature"))
     trusted.verify(signature, canonical_json(document).encode())  # raises when it does not match
 
-    anchor_file = tmp_path / "a13.json"
+    anchor_file = tmp_path / f"a{LENGTH}.json"
     written = run("anchor", "export", "--key", str(private), "--output", str(anchor_file),
                   "--db", url(db), umask=0)
     assert written.returncode == 0, written.stderr
     assert stat.S_IMODE(anchor_file.stat().st_mode) == 0o640
     checked = verify_cli(db, public, anchor_file)
     assert checked.returncode == 0, checked.stdout + checked.stderr
-    assert checked.stdout.startswith("OK: 13 records")
-    assert f"anchor {anchor_file}: seq 13 hash {digest}" in checked.stdout
+    assert checked.stdout.startswith(f"OK: {LENGTH} records")
+    assert f"anchor {anchor_file}: seq {LENGTH} hash {digest}" in checked.stdout
     as_json = json.loads(verify_cli(db, public, anchor_file, json_out=True).stdout)
-    assert as_json["ok"] and as_json["anchors"][0]["seq"] == 13
+    assert as_json["ok"] and as_json["anchors"][0]["seq"] == LENGTH
 
 
 def test_an_empty_log_is_not_anchored(tmp_path: Path, keys: tuple[Path, Path]) -> None:
@@ -187,7 +187,7 @@ def test_an_empty_log_is_not_anchored(tmp_path: Path, keys: tuple[Path, Path]) -
 def test_tail_deletion_with_checkpoint_update_and_rebuild(tmp_path: Path, db: Path,
                                                           keys: tuple[Path, Path]) -> None:
     private, public = keys
-    anchor_file = tmp_path / "a13.json"
+    anchor_file = tmp_path / f"a{LENGTH}.json"
     export(db, private, anchor_file)
     (hash10,) = stored(db, "SELECT hash FROM events WHERE seq = 10")[0]
     tamper(db, ("DELETE FROM events WHERE seq > ?", (10,)),
@@ -202,14 +202,14 @@ def test_tail_deletion_with_checkpoint_update_and_rebuild(tmp_path: Path, db: Pa
     anchored = verify_cli(db, public, anchor_file)
     assert anchored.returncode == 1
     assert "first bad seq: 11" in anchored.stdout
-    assert "records 11..13 were removed" in anchored.stderr
+    assert f"records 11..{LENGTH} were removed" in anchored.stderr
     assert str(anchor_file) in anchored.stderr
 
 
 def test_rehashed_forgery_is_found_only_with_an_anchor(tmp_path: Path, db: Path,
                                                        keys: tuple[Path, Path]) -> None:
     private, public = keys
-    anchor_file = tmp_path / "a13.json"
+    anchor_file = tmp_path / f"a{LENGTH}.json"
     export(db, private, anchor_file)
     forge_description(db, 3)
     assert run("rebuild", "--db", url(db)).returncode == 0
@@ -220,35 +220,35 @@ def test_rehashed_forgery_is_found_only_with_an_anchor(tmp_path: Path, db: Path,
     anchored = verify_cli(db, public, anchor_file)
     assert anchored.returncode == 1
     assert "first bad seq: 1" in anchored.stdout.splitlines()
-    assert "records in (0, 13] were changed or replaced" in anchored.stderr
+    assert f"records in (0, {LENGTH}] were changed or replaced" in anchored.stderr
 
 
 def test_two_anchors_a_forgery_between_them(tmp_path: Path, db: Path,
                                             keys: tuple[Path, Path]) -> None:
     private, public = keys
-    first, second = tmp_path / "a13.json", tmp_path / "a20.json"
+    first, second = tmp_path / f"a{LENGTH}.json", tmp_path / f"a{LENGTH + 7}.json"
     export(db, private, first)
-    assert append_reports(db, 7) == 20
+    assert append_reports(db, 7) == LENGTH + 7
     export(db, private, second)
-    forge_description(db, 16)
+    forge_description(db, LENGTH + 2)
 
     anchored = verify_cli(db, public, second, first)  # checked in seq order, not as given
     assert anchored.returncode == 1
-    assert "first bad seq: 14" in anchored.stdout.splitlines()
-    assert "records in (13, 20] were changed or replaced" in anchored.stderr
+    assert f"first bad seq: {LENGTH + 1}" in anchored.stdout.splitlines()
+    assert f"records in ({LENGTH}, {LENGTH + 7}] were changed or replaced" in anchored.stderr
     assert str(second) in anchored.stderr and str(first) not in anchored.stderr
 
 
 def test_records_appended_after_the_anchor_still_verify(tmp_path: Path, db: Path,
                                                         keys: tuple[Path, Path]) -> None:
     private, public = keys
-    anchor_file = tmp_path / "a13.json"
+    anchor_file = tmp_path / f"a{LENGTH}.json"
     export(db, private, anchor_file)
-    assert append_reports(db, 3) == 16
+    assert append_reports(db, 3) == LENGTH + 3
     done = verify_cli(db, public, anchor_file)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.startswith("OK: 16 records")
-    assert "seq 13" in done.stdout
+    assert done.stdout.startswith(f"OK: {LENGTH + 3} records")
+    assert f"seq {LENGTH}" in done.stdout
 
 
 # -- anchors that cannot be trusted ----------------------------------------------------------------
@@ -326,14 +326,14 @@ def test_broken_chain_below_an_anchor_is_reported_once(tmp_path: Path, db: Path)
 
 def test_matching_anchors_below_a_forgery_still_match(tmp_path: Path, db: Path) -> None:
     key = Ed25519PrivateKey.generate()
-    api_anchor(db, key, tmp_path / "a13.json")
+    first, second = tmp_path / f"a{LENGTH}.json", tmp_path / f"a{LENGTH + 4}.json"
+    api_anchor(db, key, first)
     append_reports(db, 4)
-    api_anchor(db, key, tmp_path / "a17.json")
-    forge_description(db, 15)
-    checked, _problems, first_bad, ok = api_verify(db, key, tmp_path / "a13.json",
-                                                   tmp_path / "a17.json")
-    assert not ok and first_bad == 14
-    assert [(m.path.name, m.anchor.seq) for m in checked.matched] == [("a13.json", 13)]
+    api_anchor(db, key, second)
+    forge_description(db, LENGTH + 2)
+    checked, _problems, first_bad, ok = api_verify(db, key, first, second)
+    assert not ok and first_bad == LENGTH + 1
+    assert [(m.path.name, m.anchor.seq) for m in checked.matched] == [(first.name, LENGTH)]
 
 
 def test_make_anchor_refuses_a_broken_chain(db: Path) -> None:
@@ -354,7 +354,7 @@ def test_export_never_overwrites_without_force(tmp_path: Path, db: Path,
     forced = run("anchor", "--key", str(keys[0]), "--output", str(target), "--force",
                  "--db", url(db))
     assert forced.returncode == 0, forced.stderr
-    assert json.loads(target.read_text())["seq"] == 13
+    assert json.loads(target.read_text())["seq"] == LENGTH
     assert stat.S_IMODE(target.stat().st_mode) == 0o640
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".anchor")] == []
 
@@ -371,7 +371,7 @@ def test_export_never_follows_a_symlink_at_the_target(tmp_path: Path, db: Path,
                  "--db", url(db))
     assert forced.returncode == 0, forced.stderr
     assert victim.read_text() == "do not touch"
-    assert not target.is_symlink() and json.loads(target.read_text())["seq"] == 13
+    assert not target.is_symlink() and json.loads(target.read_text())["seq"] == LENGTH
 
 
 def test_keygen_never_overwrites_or_follows(tmp_path: Path) -> None:
@@ -425,10 +425,11 @@ def test_scheduler_writes_when_the_head_moves_and_at_stop(tmp_path: Path, db: Pa
     scheduler.start()
     wait_for(lambda: len(anchor_names(directory)) == 1)
     time.sleep(0.3)  # several intervals, the head unchanged: no new file
-    assert len(anchor_names(directory)) == 1 and anchor_names(directory)[0].endswith("seq13.json")
+    assert len(anchor_names(directory)) == 1
+    assert anchor_names(directory)[0].endswith(f"-seq{LENGTH}.json")
     serving.report("WHEEL_SLIP", "FAILED", severity=1, source_id="/robot/wheel")
     wait_for(lambda: len(anchor_names(directory)) == 2)
-    assert anchor_names(directory)[1].endswith("-seq14.json")
+    assert anchor_names(directory)[1].endswith(f"-seq{LENGTH + 1}.json")
     assert scheduler.alive
     scheduler.stop()
     assert not scheduler.alive
@@ -440,11 +441,12 @@ def test_scheduler_writes_when_the_head_moves_and_at_stop(tmp_path: Path, db: Pa
     late.start()
     serving.report("WHEEL_SLIP", "PASSED", source_id="/robot/wheel")
     late.stop()  # the shutdown anchor, long before the first interval
-    assert anchor_names(directory)[-1].endswith("-seq15.json")
+    assert anchor_names(directory)[-1].endswith(f"-seq{LENGTH + 2}.json")
     with FaultLedger.open(url(db), background=False) as reader:
         checked = anchors.verify_anchors(reader, anchors.anchor_files(directory),
                                          anchors.load_public_key(public))
-    assert checked.ok and [m.anchor.seq for m in checked.matched] == [13, 14, 15]
+    assert checked.ok and [m.anchor.seq for m in checked.matched] == [
+        LENGTH, LENGTH + 1, LENGTH + 2]
 
 
 def test_scheduler_survives_failures_and_recovers(tmp_path: Path, db: Path,
@@ -486,13 +488,14 @@ def test_scheduler_refuses_to_anchor_a_changed_log_and_prunes(
     with FaultLedger.open(url(db), background=False) as ledger:
         scheduler = anchors.AnchorScheduler(ledger, private, directory, keep=2)
         first = scheduler.run_once()
-        assert first is not None and first.name.endswith("-seq13.json")
+        assert first is not None and first.name.endswith(f"-seq{LENGTH}.json")
         assert scheduler.run_once() is None  # nothing new
         for _ in range(3):
             ledger.report("WHEEL_SLIP", "FAILED", source_id="/robot/wheel")
             assert scheduler.run_once() is not None
             time.sleep(0.002)  # distinct milliseconds in the names
-        assert [n.split("-seq")[1] for n in anchor_names(directory)] == ["15.json", "16.json"]
+        assert [n.split("-seq")[1] for n in anchor_names(directory)] == [
+            f"{LENGTH + 2}.json", f"{LENGTH + 3}.json"]
         forge_description(db, 3)  # a re-hashed forgery behind the running manager's back
         ledger.report("WHEEL_SLIP", "PASSED", source_id="/robot/wheel")
         with caplog.at_level(logging.WARNING, logger="faultledger.service.anchors"):
@@ -517,8 +520,8 @@ def test_verify_checks_the_newest_anchor_of_the_configured_directory(
         assert scheduler is not None and scheduler.run_once() is not None
     done = run("verify", "--config", str(config))
     assert done.returncode == 0, done.stderr
-    assert "-seq13.json: seq 13" in done.stdout
-    forge_description(db, 2)
+    assert f"-seq{LENGTH}.json: seq {LENGTH}" in done.stdout
+    forge_description(db, 3)  # the first report
     done = run("verify", "--config", str(config))
     assert done.returncode == 1 and "first bad seq: 1" in done.stdout
 

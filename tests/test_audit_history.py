@@ -259,7 +259,8 @@ def test_jsonl_export_round_trips_and_recomputes_the_whole_chain(ledger: FaultLe
     assert done.returncode == 0, done.stderr
     rows = parse_jsonl(done.stdout)
     records = ledger.history()
-    assert len(rows) == len(records)
+    identity = ledger.identity
+    assert len(rows) == len(records) and identity is not None
     previous = GENESIS_HASH
     for row, record in zip(rows, records, strict=True):
         assert row == {
@@ -269,6 +270,7 @@ def test_jsonl_export_round_trips_and_recomputes_the_whole_chain(ledger: FaultLe
             "recorded_at": row["recorded_at"], "recorded_at_ns": record.recorded_at_ns,
             "schema_version": record.schema_version, "payload": record.payload,
             "prev_hash": previous, "hash": record.hash,
+            "robot_id": identity.robot_id, "ledger_id": identity.ledger_id,
         }
         assert datetime.fromisoformat(row["occurred_at"]) == record.occurred_at
         assert row["occurred_at"].endswith(f".{record.occurred_at_ns % 10**9:09d}+00:00")

@@ -23,10 +23,7 @@ from faultledger.cli import render
 from faultledger.domain.integrity import GENESIS_HASH, record_hash
 from faultledger.errors import InvalidInputError
 from faultledger.service.audit import seq_recorded_by, seqs_recorded_between
-from tests.test_tamper import CLI, build_log, edit_payload, swap_payloads, tamper
-
-LENGTH = 14
-"""build_log's records: identity, policy, 10 reports, a clear, a report."""
+from tests.test_tamper import CLI, LENGTH, build_log, edit_payload, swap_payloads, tamper
 
 
 @pytest.fixture

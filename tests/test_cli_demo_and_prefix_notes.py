@@ -103,7 +103,7 @@ def test_two_demos_get_two_scratch_databases(tmp_path: Path) -> None:
     assert paths[0] != paths[1] and all(p.exists() for p in paths)
     assert not (tmp_path / "var").exists()
     for output in (first.stdout, second.stdout):  # each its own scenario from seq 1
-        assert "verify: OK (11 records" in output
+        assert "verify: OK (12 records" in output  # identity, policy, 9 reports, a clear
 
 
 def test_demo_with_db_adds_to_that_database_and_says_so(tmp_path: Path) -> None:
@@ -132,7 +132,8 @@ def test_demo_at_80_columns_keeps_kinds_whole() -> None:
 @pytest.fixture
 def late_db(tmp_path: Path) -> str:
     """Reports sent now about what happened yesterday (the reporter's times): recorded
-    after every time of yesterday."""
+    after every time of yesterday. Seq 1 is the log's identity, 2 the policy, 3..5 the
+    reports."""
     url = f"sqlite:///{tmp_path / 'late.db'}"
     yesterday = datetime.now(UTC) - timedelta(days=1)
     with FaultLedger.open(url, background=False) as ledger:
@@ -164,8 +165,8 @@ def test_list_at_a_seq_past_the_end_says_what_it_shows(late_db: str) -> None:
     done = run("list", "--at", "999", "--db", late_db)
     assert done.returncode == 0, done.stderr
     assert done.stderr.strip() == ("note: seq 999 is past the end of the log (its last seq is "
-                                   "4): this is the table after seq 4, the current one")
-    assert "faults as of seq 4" in done.stdout
+                                   "5): this is the table after seq 5, the current one")
+    assert "faults as of seq 5" in done.stdout
     assert all(f"LATE_{i}" in done.stdout for i in range(3))
     refused = run("state-at", "999", "--db", late_db)  # state-at names a prefix: an error
     assert refused.returncode == 2 and "seq 999 is not in the log" in refused.stderr
@@ -185,8 +186,8 @@ def test_no_note_when_the_table_is_what_was_known(late_db: str) -> None:
     assert done.returncode == 0, done.stderr
     assert done.stderr == ""
     assert all(f"LATE_{i}" in done.stdout for i in range(3))
-    by_seq = run("list", "--at", "2", "--db", late_db)
-    assert by_seq.stderr == "" and "faults as of seq 2" in by_seq.stdout
+    by_seq = run("list", "--at", "3", "--db", late_db)  # up to the first report
+    assert by_seq.stderr == "" and "faults as of seq 3" in by_seq.stdout
     assert "LATE_0" in by_seq.stdout and "LATE_1" not in by_seq.stdout
 
 

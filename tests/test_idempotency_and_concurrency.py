@@ -180,9 +180,10 @@ def test_eight_threads_reporting_are_all_acknowledged_in_a_gap_free_log(tmp_path
     by_seq: dict[int | None, str] = {r.seq: r.event_id for r in history}
     assert all(by_seq[r.seq] == r.event_id for r in answers)
     assert len({r.seq for r in answers}) == len(answers)
-    # besides the reports only the policy record (before the first report)
+    # besides the reports only the log's identity and the policy (before the first report)
+    assert [r.kind for r in history[:2]] == ["ledger_identified", "policy_changed"]
     assert [r.kind for r in history].count("fault_reported") == len(answers)
-    assert last == len(answers) + 1
+    assert last == len(answers) + 2
 
 
 def test_each_thread_sees_its_own_reports_in_order(tmp_path: Path) -> None:
@@ -198,7 +199,7 @@ def test_log_written_by_eight_threads_verifies(tmp_path: Path) -> None:
         report_concurrently(ledger)
         report = ledger.verify()
         assert report.ok, report.problems
-        assert report.records == THREADS * PER_THREAD + 1
+        assert report.records == THREADS * PER_THREAD + 2  # and the identity, the policy
         assert ledger.all_faults() == ledger.state_at(ledger.last_seq)
 
 

@@ -25,6 +25,7 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from rich.console import Console
 from sqlalchemy import create_engine
 
 from faultledger import (
@@ -36,6 +37,7 @@ from faultledger import (
     Policy,
     Reason,
 )
+from faultledger.cli import render
 from faultledger.domain.clock import to_ns
 from faultledger.domain.events import (
     FaultReported,
@@ -44,6 +46,7 @@ from faultledger.domain.events import (
     PolicyChanged,
 )
 from faultledger.domain.integrity import GENESIS_HASH
+from faultledger.domain.periods import default_calendar
 from faultledger.domain.projector import Projector
 from faultledger.domain.statistics import StatsFold
 from faultledger.domain.types import EventType
@@ -462,6 +465,30 @@ def test_exports_carry_the_identity_on_every_record_and_still_verify(tmp_path: P
     shown = run_cli("history", "--kind", "ledger_identified", "--db", url(path), "--wide")
     assert shown.returncode == 0, shown.stderr
     assert "amr-07" in shown.stdout
+
+
+def test_an_80_column_history_keeps_the_kind_column_and_breaks_long_kinds(
+        tmp_path: Path) -> None:
+    """The narrow table shows the robot over the ledger's short id; a kind longer than its
+    column is broken after an underscore onto a second line (never an escaped ``\\n``)."""
+    with FaultLedger.open(url(tmp_path / "faults.db"), robot_id="amr-07",
+                          policy=Policy(confirmation_threshold=-3, auto_confirm_after_sec=1.0),
+                          background=False) as ledger:
+        assert ledger.report("A", "FAILED", 1, "", "/a", at=T0).accepted
+        assert ledger.run_timers(T0 + timedelta(seconds=2)) == 1
+        records = ledger.history()
+        identity = ledger.identity
+    assert identity is not None
+    out = Console(width=80, file=io.StringIO(), color_system=None)
+    out.print(render.history_table(records, default_calendar(), 80))
+    shown = out.file.getvalue()  # type: ignore[attr-defined]
+    lines = shown.splitlines()
+    assert "kind" in lines[2] and "\\n" not in shown
+    assert any("ledger_" in line and "amr-07" in line for line in lines)
+    assert any("identified" in line and f"ledger {identity.ledger_id[:8]}…" in line
+               for line in lines)
+    assert any("fault_confirmed_" in line for line in lines)
+    assert any("by_timer" in line for line in lines)
 
 
 def test_cli_verify_shows_the_identity(tmp_path: Path) -> None:

@@ -22,6 +22,8 @@ from faultledger.domain.integrity import record_hash
 
 T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 CLI = [sys.executable, "-m", "faultledger.cli.main"]
+LENGTH = 14
+"""build_log's records: the log's identity, the policy, 10 reports, a clear, a report."""
 
 
 def build_log(db: Path) -> int:
@@ -45,7 +47,7 @@ def build_log(db: Path) -> int:
         ledger.report("MOTOR_OVERHEAT", "PASSED", source_id="/robot/base",
                       at=T0 + timedelta(seconds=20))
         length = ledger.last_seq
-    assert length == 14  # ledger_identified + policy_changed + 10 reports + clear + 1 report
+    assert length == LENGTH
     return length
 
 

@@ -12,12 +12,14 @@ import pytest
 from tests.http.conftest import Server, start_server
 
 CODES = ("PAGE_A", "PAGE_B", "PAGE_C")
+TOTAL = 302
+"""The log's identity (seq 1), the policy (seq 2) and the 300 reports."""
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    """301 records: seq 1 is the policy, then reports of A, B, C in turn (A at seq 2, 5, …;
-    every sixth report a PASSED)."""
+    """302 records: seq 1 is the log's identity, seq 2 the policy, then reports of A, B, C in
+    turn (A at seq 3, 6, …; every sixth report a PASSED)."""
     running = start_server(tmp_path_factory.mktemp("history") / "faults.db")
     reports = [{"fault_code": CODES[i % 3], "event_type": "PASSED" if i % 6 == 5 else "FAILED",
                 "severity": 1, "source_id": f"/src/{i % 2}"} for i in range(300)]
@@ -55,14 +57,14 @@ def pages_backwards(server: Server, size: int, **params: Any) -> list[list[int]]
 
 def test_the_newest_page_first_then_older_ones_without_gap_or_repeat(server: Server) -> None:
     everything = all_seqs(server)
-    assert everything == list(range(1, 302))
+    assert everything == list(range(1, TOTAL + 1))
     first = get(server, order="desc", limit=50)
-    assert [r["seq"] for r in first["items"]] == list(range(301, 251, -1))
-    assert first["next_before_seq"] == 252
-    second = get(server, order="desc", limit=50, before_seq=252)
-    assert [r["seq"] for r in second["items"]] == list(range(251, 201, -1))
+    assert [r["seq"] for r in first["items"]] == list(range(TOTAL, TOTAL - 50, -1))
+    assert first["next_before_seq"] == TOTAL - 49
+    second = get(server, order="desc", limit=50, before_seq=TOTAL - 49)
+    assert [r["seq"] for r in second["items"]] == list(range(TOTAL - 50, TOTAL - 100, -1))
     pages = pages_backwards(server, 50)
-    assert [len(p) for p in pages] == [50, 50, 50, 50, 50, 50, 1]
+    assert [len(p) for p in pages] == [50, 50, 50, 50, 50, 50, 2]
     assert [seq for page in pages for seq in page] == everything[::-1]
 
 
@@ -96,7 +98,7 @@ def test_filters_hold_on_every_page_and_total_counts_them(server: Server,
 
 def test_one_code_of_300_reports(server: Server) -> None:
     """The fault detail's question: the 100 reports of one code, newest first, with the count."""
-    a_seqs = [2 + 3 * i for i in range(100)]
+    a_seqs = [3 + 3 * i for i in range(100)]
     page = get(server, code="PAGE_A", order="desc", limit=50, total="true")
     assert [r["seq"] for r in page["items"]] == a_seqs[::-1][:50]
     assert {r["fault_code"] for r in page["items"]} == {"PAGE_A"}
@@ -111,11 +113,11 @@ def test_ascending_paging_is_unchanged_and_may_be_bounded_by_before_seq(server: 
     assert [r["seq"] for r in first["items"]] == [1, 2]
     assert first == {"items": first["items"], "next_after_seq": 2}
     rest = get(server, after_seq=2, limit=10_000)
-    assert [r["seq"] for r in rest["items"]] == list(range(3, 302))
+    assert [r["seq"] for r in rest["items"]] == list(range(3, TOTAL + 1))
     assert rest["next_after_seq"] is None
     window = get(server, after_seq=10, before_seq=15, total="true")
     assert [r["seq"] for r in window["items"]] == [11, 12, 13, 14]
-    assert window["total"] == 301  # the filters' count, not the page's
+    assert window["total"] == TOTAL  # the filters' count, not the page's
     assert get(server, code="NO_SUCH_CODE", total="true") == {
         "items": [], "next_after_seq": None, "total": 0}
 

@@ -335,11 +335,15 @@ def summary(record: LogRecord) -> str:
 
 def _subject_and_details(record: LogRecord, room: int) -> tuple[str, str]:
     """What a narrow history row shows in its one ``code / details`` column: the fault code
-    (or a goal's action) and the details; ids longer than ``room`` are shortened."""
+    (or a goal's action, or the log's robot) and the details; ids longer than ``room`` are
+    shortened."""
     p = record.payload
     if record.kind == "goal_outcome":
         return (shorten(str(p["action"]), room),
                 f"{p['status']} goal {short_goal(str(p['goal_id']))}")
+    if record.kind == "ledger_identified":  # the robot, over its log's short id
+        return (shorten(str(p["robot_id"]), room),
+                f"ledger {short_goal(str(p['ledger_id']))}")
     if record.kind == "fault_cleared":
         reason = f": {p['reason']}" if p["reason"] else ""
         return (shorten(record.fault_code or "", room),
@@ -393,7 +397,8 @@ def history_table(records: Iterable[LogRecord], calendar: ShiftCalendar,
         if subject and details:
             text.append("\n")
         text.append(printable(details))
-        narrow_rows.append([seq, occurred, cell(kind), text])
+        kind_cell = Text("\n").join(cell(line) for line in kind.split("\n"))  # lines kept
+        narrow_rows.append([seq, occurred, kind_cell, text])
     return fitted_first("fault log", [(wide_columns, wide_rows),
                                       (narrow_columns, narrow_rows)], width)
 
