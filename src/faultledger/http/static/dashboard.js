@@ -15,6 +15,7 @@ const HISTORY_PAGE = 100;
 const state = {
   token: sessionStorage.getItem("faultledger-token") || "",
   faults: new Map(), filter: "", lastEventId: null, selected: null, streaming: false,
+  robot: "", robotFaults: new Map(), view: "faults", started: false,
 };
 const $ = (id) => document.getElementById(id);
 
@@ -129,26 +130,35 @@ function severityBadge(severity) {
 }
 
 // -- faults ----------------------------------------------------------------------------------
+// A robot's faults (the robot filter of a fleet central) carry robot_id and ledger_id: a
+// robot whose database was replaced has the same code in two logs, so they are keyed by both.
+function faultKey(fault) { return fault.ledger_id ? `${fault.ledger_id}/${fault.fault_code}` : fault.fault_code; }
+
 function faultRow(fault) {
+  const key = faultKey(fault);
+  const code = el("td", fault.fault_code);
+  if (fault.ledger_id && logsOf(fault.robot_id).length > 1) code.appendChild(el("span", `log ${fault.ledger_id.slice(0, 8)}…`, "ledger"));
   const tr = row([
-    el("td", fault.fault_code), cell(statusBadge(fault.status)), cell(severityBadge(fault.severity_label)),
+    code, cell(statusBadge(fault.status)), cell(severityBadge(fault.severity_label)),
     el("td", fault.description, "text wide"), fault.occurrence_count,
     when(fault.last_occurred), el("td", fault.reporting_sources.join(", "), "text wide"),
   ]);
   tr.dataset.code = fault.fault_code;
-  if (fault.fault_code === state.selected) tr.classList.add("selected");
-  tr.addEventListener("click", () => selectFault(fault.fault_code));
+  tr.dataset.key = key;
+  if (key === state.selected) tr.classList.add("selected");
+  tr.addEventListener("click", () => (state.robot ? selectRobotFault(key) : selectFault(fault.fault_code)));
   return tr;
 }
 
 function renderFaults(changed) {
   const wanted = GROUPS[state.filter];
-  const shown = [...state.faults.values()].filter((f) => wanted.includes(f.status))
+  const all = state.robot ? state.robotFaults : state.faults;
+  const shown = [...all.values()].filter((f) => wanted.includes(f.status))
     .sort((a, b) => (ORDER[a.status] - ORDER[b.status]) || (b.last_occurred - a.last_occurred));
   const body = $("fault-table").tBodies[0];
   body.replaceChildren(...shown.map(faultRow));
   $("no-faults").hidden = shown.length > 0;
-  $("fault-count").textContent = `${shown.length} shown of ${plural(state.faults.size, "fault", "faults")}`;
+  $("fault-count").textContent = `${shown.length} shown of ${plural(all.size, "fault", "faults")}${state.robot ? ` of ${state.robot}` : ""}`;
   if (changed) {
     const tr = body.querySelector(`tr[data-code="${CSS.escape(changed)}"]`);
     if (tr) tr.classList.add("flash");
@@ -182,6 +192,7 @@ function handleBlock(block) {
   if (!data) return;
   const event = JSON.parse(data);
   state.faults.set(event.fault.fault_code, event.fault);
+  if (state.robot) return;  // the stream is this server's own log, not the robot's shown
   renderFaults(event.fault.fault_code);
   if (state.selected === event.fault.fault_code) refreshDetail();
 }
@@ -232,13 +243,17 @@ function queueDetail(task) {
   return detail.chain;
 }
 
+function markSelected(key) {
+  document.querySelectorAll("#fault-table tbody tr").forEach((tr) => tr.classList.toggle("selected", tr.dataset.key === key));
+}
+
 function selectFault(code) {
   state.selected = code;
-  document.querySelectorAll("#fault-table tr.selected").forEach((tr) => tr.classList.remove("selected"));
-  const tr = document.querySelector(`#fault-table tr[data-code="${CSS.escape(code)}"]`);
-  if (tr) tr.classList.add("selected");
+  markSelected(code);
   $("detail").hidden = false;
   $("view-faults").classList.add("detail-open");
+  $("detail-history-part").hidden = false;
+  $("detail-robot-note").hidden = true;
   $("detail-code").textContent = code;
   $("detail-description").textContent = "";
   $("detail-fields").replaceChildren();
@@ -348,13 +363,13 @@ $("detail-older").addEventListener("click", () => {
   queueDetail((code) => loadDetailHistory(code, "older"))
     .finally(() => { $("detail-older").disabled = false; });
 });
-$("detail-close").addEventListener("click", () => {
+function closeDetail() {
   $("detail").hidden = true;
   $("view-faults").classList.remove("detail-open");
   state.selected = null;
   detail.code = null;
-  renderFaults();
-});
+}
+$("detail-close").addEventListener("click", () => { closeDetail(); renderFaults(); });
 $("status-filter").addEventListener("change", (event) => { state.filter = event.target.value; renderFaults(); });
 $("clear-form").addEventListener("submit", async (event) => {
   event.preventDefault();
@@ -612,22 +627,277 @@ for (const [id, format] of [["export-csv", "csv"], ["export-jsonl", "jsonl"]]) {
   });
 }
 
+// -- a fleet central: robots' faults, and the Fleet view -----------------------------------------
+// Shown only when this server holds robot logs (GET /api/v1/fleet/robots lists them). A
+// robot's log changes only when it pushes, and the central's event stream is its own log's,
+// so the robot's faults and the Fleet view are read again every few seconds while shown.
+const LIVE_LAG_SEC = 30;
+/** A robot more than this behind (or with records the central lacks) is "behind": its
+ * current shift's figures are marked provisional too. Syncing with --follow, a robot makes
+ * contact every 5 s. */
+const TICK_MS = 5000;
+const fleet = { chains: [], load: 0, since: null, confirmed: new Map(), robotLoad: 0 };
+
+function logsOf(robot) { return fleet.chains.filter((c) => c.robot_id === robot); }
+
+async function loadRobots() {
+  const body = await apiJson("/api/v1/fleet/robots");
+  fleet.chains = body.items;
+  const names = [...new Set(body.items.map((c) => c.robot_id))].sort();
+  const select = $("robot-filter");
+  const listed = [...select.options].slice(1).map((option) => option.value);
+  if (names.join("\n") !== listed.join("\n")) {
+    const own = el("option", "this server's own log");
+    own.value = "";
+    select.replaceChildren(own, ...names.map((name) => {
+      const option = el("option", name);
+      option.value = name;
+      return option;
+    }));
+    select.value = state.robot;
+  }
+  $("robot-filter-label").hidden = names.length === 0;
+  $("fleet-tab").hidden = names.length === 0;
+  return body.items;
+}
+
+function syncText(chain) {
+  const behind = chain.lag_seconds >= LIVE_LAG_SEC || chain.lag_records > 0;
+  return { behind, text: behind ? `${duration(chain.lag_seconds)} behind` : `${Math.round(chain.lag_seconds)} s` };
+}
+
+function robotNote(robot) {
+  const logs = logsOf(robot);
+  const parts = logs.map((c) => {
+    const sync = syncText(c);
+    return `${sync.behind ? sync.text : "in sync"}, last contact ${clock(Date.parse(c.last_pushed_at), true)}`;
+  });
+  const held = logs.length > 1 ? `its ${logs.length} logs (its database was replaced)` : "its log";
+  return `${robot}'s faults as this central holds ${held}: ${parts.join("; ")}. Read again every 5 s; clear a fault on the robot.`;
+}
+
+async function loadRobotFaults() {
+  const robot = state.robot;
+  if (!robot) return;
+  const load = ++fleet.robotLoad;
+  const note = $("robot-note");
+  try {
+    const body = await apiJson(`/api/v1/faults?robot=${encodeURIComponent(robot)}&status=all`);
+    if (load !== fleet.robotLoad || state.robot !== robot) return;
+    state.robotFaults = new Map(body.items.map((f) => [faultKey(f), f]));
+    note.className = "muted";
+    note.textContent = robotNote(robot);
+    renderFaults();
+    const chosen = state.robotFaults.get(state.selected);
+    if (chosen) showRobotFault(chosen);
+    $("view-faults").dataset.robot = robot;
+  } catch (error) {
+    if (load !== fleet.robotLoad || error instanceof AuthNeeded) return;
+    note.className = "error";
+    note.textContent = error.message;
+  }
+}
+
+function chooseRobot(robot) {
+  state.robot = robot;
+  $("robot-filter").value = robot;
+  closeDetail();
+  state.robotFaults = new Map();
+  delete $("view-faults").dataset.robot;
+  $("robot-note").hidden = !robot;
+  $("robot-note").className = "muted";
+  $("robot-note").textContent = robot ? `reading ${robot}'s faults…` : "";
+  renderFaults();
+  loadRobotFaults();
+}
+$("robot-filter").addEventListener("change", (event) => chooseRobot(event.target.value));
+
+function selectRobotFault(key) {
+  const fault = state.robotFaults.get(key);
+  if (!fault) return;
+  state.selected = key;
+  detail.code = null;  // no history loads: those read this server's own log
+  markSelected(key);
+  showRobotFault(fault);
+}
+
+/** The detail of a robot's fault from its list item: the central cannot change a robot's log. */
+function showRobotFault(fault) {
+  $("detail").hidden = false;
+  $("view-faults").classList.add("detail-open");
+  $("detail-code").textContent = fault.fault_code;
+  $("detail-description").textContent = fault.description || "";
+  const fields = $("detail-fields");
+  fields.replaceChildren();
+  const add = (name, value) => {
+    fields.appendChild(el("dt", name));
+    const dd = el("dd");
+    dd.append(value);
+    fields.appendChild(dd);
+  };
+  add("robot", fault.robot_id);
+  add("log", fault.ledger_id);
+  add("status", statusBadge(fault.status));
+  add("severity", severityBadge(fault.severity_label));
+  add("occurrences", String(fault.occurrence_count));
+  add("first occurred", when(fault.first_occurred, true));
+  add("last occurred", when(fault.last_occurred, true));
+  add("last passed", when(fault.last_passed, true));
+  add("sources", fault.reporting_sources.join(", ") || "–");
+  $("clear-form").hidden = true;
+  $("clear-message").textContent = "";
+  $("detail-history-part").hidden = true;
+  $("detail-robot-note").hidden = false;
+  $("detail-robot-note").textContent = `A fault in ${fault.robot_id}'s log as this central holds it: clear it on the robot.`;
+}
+
+/** Runs ``work`` on every item, at most ``width`` at a time (the browser's connections are few). */
+async function inTurns(items, width, work) {
+  let next = 0;
+  const worker = async () => {
+    while (next < items.length) await work(items[next++]);
+  };
+  await Promise.all(Array.from({ length: Math.min(width, items.length) }, worker));
+}
+
+/** Confirmed faults per log, asked again only for a robot whose logs changed since (a fault
+ * changes only with a record, and a record moves the log's last_seq). */
+async function confirmedCounts(chains) {
+  const seqs = new Map();
+  for (const c of chains) seqs.set(c.robot_id, `${seqs.get(c.robot_id) || ""}${c.ledger_id}:${c.last_seq};`);
+  const stale = [...seqs].filter(([robot, held]) => (fleet.confirmed.get(robot) || {}).held !== held);
+  await inTurns(stale, 4, async ([robot, held]) => {
+    const body = await apiJson(`/api/v1/faults?robot=${encodeURIComponent(robot)}&status=confirmed`);
+    const counts = new Map();
+    for (const f of body.items) counts.set(f.ledger_id, (counts.get(f.ledger_id) || 0) + 1);
+    fleet.confirmed.set(robot, { held, counts });
+  });
+  return fleet.confirmed;
+}
+
+/** The current shift (the last one, when it ends at as_of: counted up to now) and the one
+ * before it, among the rows' shifts; gaps between shifts are left out. */
+function shiftsOf(rows, asOf) {
+  const periods = new Map();
+  for (const r of rows) if (r.period !== "unscheduled" && !periods.has(r.period)) periods.set(r.period, r);
+  const ordered = [...periods.values()].sort((a, b) => Date.parse(a.start) - Date.parse(b.start));
+  const last = ordered[ordered.length - 1];
+  const running = Boolean(last) && Math.abs(Date.parse(last.end) - Date.parse(asOf)) < 1000;
+  const previous = running ? ordered[ordered.length - 2] : last;
+  return { current: running ? last.period : null, previous: previous ? previous.period : null };
+}
+
+function shiftLabel(id, now) {
+  if (!id) return now ? "no shift now" : "–";
+  const [day, name] = id.split("/");
+  return now ? `${name}, now` : `${name} ${day.slice(5)}`;
+}
+
+async function loadFleet() {
+  const load = ++fleet.load;
+  try {
+    const chains = await loadRobots();
+    // From the previous shift found last time (its start), at first from 4 days back: far
+    // enough for the shift before the current one across a weekend without shifts.
+    const params = new URLSearchParams({ by: "shift", since: fleet.since || new Date(Date.now() - 4 * 86400e3).toISOString() });
+    for (const key of ["robot", "line", "site"]) params.append("group_by", key);
+    const stats = await apiJson(`/api/v1/stats?${params}`);
+    if (load !== fleet.load) return;
+    const confirmed = await confirmedCounts(chains);
+    if (load !== fleet.load) return;
+    renderFleet(chains, stats, confirmed);
+    $("fleet-message").textContent = "";
+    $("view-fleet").dataset.shown = stats.as_of;
+  } catch (error) {
+    fleet.since = null;
+    if (load === fleet.load) showError("fleet-message", error);
+  }
+}
+
+function renderFleet(chains, stats, confirmed) {
+  const { current, previous } = shiftsOf(stats.items, stats.as_of);
+  fleet.since = previous;
+  const figures = new Map();
+  for (const r of stats.items) figures.set(`${r.robot}|${r.ledger_id || ""}|${r.period}`, r);
+  let provisional = false;
+  const rows = chains.map((c) => {
+    const ledger = logsOf(c.robot_id).length > 1 ? c.ledger_id : "";
+    const at = (period) => (period ? figures.get(`${c.robot_id}|${ledger}|${period}`) : undefined);
+    const now = at(current), before = at(previous);
+    const sync = syncText(c);
+    const figure = (r, key, running) => {
+      if (!r) return el("td", "–", "num fig");
+      // complete: false is the central's word for "the robot has not pushed past this
+      // period's end"; the current shift ends now, so there it counts once the robot is behind.
+      const unsure = r.complete === false && (!running || sync.behind);
+      const td = el("td", r[key], unsure ? "num fig provisional" : "num fig");
+      if (unsure) {
+        td.appendChild(el("span", "*", "mark"));
+        td.title = "still syncing: figures may grow";
+        provisional = true;
+      }
+      return td;
+    };
+    const name = el("td", c.robot_id, "robot");
+    if (ledger) name.appendChild(el("span", `log ${c.ledger_id.slice(0, 8)}…`, "ledger"));
+    const labels = now || before || {};
+    const count = (confirmed.get(c.robot_id) || { counts: new Map() }).counts.get(c.ledger_id) || 0;
+    const syncCell = el("td", sync.text, sync.behind ? "sync behind" : "sync ok");
+    if (c.lag_records) syncCell.title = `${plural(c.lag_records, "record", "records")} not at the central at the last contact`;
+    const tr = row([name, el("td", labels.line || "", "labels"), el("td", labels.site || "", "labels"),
+      el("td", count, count ? "num alert" : "num"),
+      figure(now, "estops", true), figure(before, "estops", false),
+      figure(now, "aborted_goals", true), figure(before, "aborted_goals", false),
+      syncCell, el("td", clock(Date.parse(c.last_pushed_at)), "contact")]);
+    tr.dataset.robot = c.robot_id;
+    tr.dataset.ledger = c.ledger_id;
+    tr.addEventListener("click", () => { showView("faults"); chooseRobot(c.robot_id); });
+    return tr;
+  });
+  const table = $("fleet-table");
+  table.classList.toggle("no-labels", !stats.items.some((r) => r.line || r.site));
+  table.querySelectorAll("th.shift-current").forEach((th) => { th.textContent = shiftLabel(current, true); th.title = current || ""; });
+  table.querySelectorAll("th.shift-previous").forEach((th) => { th.textContent = shiftLabel(previous, false); th.title = previous || ""; });
+  table.tBodies[0].replaceChildren(...rows);
+  $("fleet-legend").hidden = !provisional;
+  const counted = `counted up to ${clock(Date.parse(stats.as_of), true)}, read again every 10 s`;
+  $("fleet-span").textContent = current
+    ? `Current shift ${current} (in progress), previous ${previous || "–"}; ${counted}`
+    : `No shift now; the last was ${previous || "–"}; ${counted}`;
+}
+
 // -- views -----------------------------------------------------------------------------------
 const loaded = new Set();
 function showView(name) {
+  state.view = name;
   document.querySelectorAll(".tab").forEach((tab) => tab.classList.toggle("active", tab.dataset.view === name));
   document.querySelectorAll(".view").forEach((view) => { view.hidden = view.id !== `view-${name}`; });
   if (name === "stats" && !loaded.has(name)) loadStats();
   // The History tab opens at the newest record of the last search, every time it is shown.
   if (name === "history") loadHistory(false);
+  if (name === "fleet") loadFleet();
+  if (name === "faults" && state.robot) loadRobotFaults();
   loaded.add(name);
 }
 document.querySelectorAll(".tab").forEach((tab) => tab.addEventListener("click", () => showView(tab.dataset.view)));
 
+let ticks = 0;
+setInterval(() => {
+  ticks += 1;
+  // Not while the page asks for a token (each 401 would ask again and take the focus).
+  if (!state.started || document.hidden || !$("token-form").hidden) return;
+  if (state.view === "faults" && state.robot) loadRobotFaults();
+  if (state.view === "fleet" && ticks % 2 === 0) loadFleet();
+  else if (ticks % 6 === 0) loadRobots().catch(() => {});  // a central's first robot shows up
+}, TICK_MS);
+
 async function start() {
   try {
     await loadFaults();
+    state.started = true;
     stream();
+    // A server that holds no robot logs shows neither the robot filter nor the Fleet view.
+    await loadRobots().catch((error) => { if (error instanceof AuthNeeded) throw error; });
   } catch (error) {
     if (!(error instanceof AuthNeeded)) { setConnection(false); $("fault-count").textContent = error.message; }
   }
