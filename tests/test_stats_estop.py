@@ -80,7 +80,7 @@ def shift_stats(ledger: FaultLedger, group_by: Sequence[str] = ()) -> list[Stats
 
 def figures(row: StatsRow) -> dict[str, object]:
     return {name: getattr(row, name) for name in row.__dataclass_fields__
-            if name not in ("period", "group")}
+            if name not in ("period", "group", "complete")}
 
 
 def approx_figures(expected: dict[str, object]) -> dict[str, object]:

@@ -41,7 +41,8 @@ HEALING_ARGS = ("--ros-args", "-p", "healing_enabled:=true", "-p", "healing_thre
 AS_OF = datetime(2026, 11, 21, 12, 0, 30, 500_000, tzinfo=UTC)
 """Default range with this as_of: [2026-11-20T12:00, 2026-11-21T12:00) UTC."""
 ESTOP_GLOB = "HW_*_EMERGENCY_STOP"
-FIGURES = tuple(f.name for f in fields(StatsRow) if f.name not in ("period", "group"))
+FIGURES = tuple(f.name for f in fields(StatsRow)
+                if f.name not in ("period", "group", "complete"))  # complete: a central's
 PERIOD_FIELDS = ("period_id", "period_name", "production_day", "start", "end")
 GROUP_FIELDS = ("code", "source", "severity", "action")
 BERLIN_SHIFTS = """\

@@ -19,6 +19,9 @@ from typing import Any
 from sqlalchemy import Connection
 from sqlalchemy.engine import Dialect
 from sqlalchemy.sql import ClauseElement
+from sqlalchemy.sql.dml import Insert
+
+from faultledger.store.dialects import rules_for
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,12 +65,28 @@ def execute_many(conn: Connection, statement: ClauseElement,
                  rows: Sequence[Mapping[str, Any]]) -> None:
     if not rows:
         return
+    if _plain_insert(statement) and conn.dialect.name != "sqlite":
+        # PostgreSQL: COPY (store/dialects.py), several times faster than executemany.
+        table: Any = statement.table  # type: ignore[attr-defined]
+        columns = tuple(rows[0])
+        pick = itemgetter(*columns)
+        tuples = [pick(row) for row in rows] if len(columns) > 1 else [
+            (row[columns[0]],) for row in rows]
+        rules_for(conn.dialect.name).insert_rows(conn, table, columns, tuples)
+        return
     prepared = prepare(statement, conn.dialect)
     cursor = _cursor(conn)
     try:
         cursor.executemany(prepared.sql, prepared.params_many(rows))
     finally:
         cursor.close()
+
+
+def _plain_insert(statement: ClauseElement) -> bool:
+    """An INSERT of given rows with no ON CONFLICT clause (those can be COPYed)."""
+    return (isinstance(statement, Insert) and statement.table is not None
+            and getattr(statement, "_post_values_clause", None) is None
+            and not statement._multi_values)
 
 
 def fetch_one(conn: Connection, statement: ClauseElement,
