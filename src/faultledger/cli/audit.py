@@ -34,6 +34,7 @@ from faultledger.cli.options import (
     ConfigOption,
     DbOption,
     JsonOption,
+    RobotOption,
     ShiftsOption,
     WideOption,
     opened,
@@ -59,8 +60,10 @@ from faultledger.service.anchors import (
     with_anchors,
 )
 from faultledger.service.audit import export_history, seq_recorded_by, seqs_recorded_between
+from faultledger.service.bootstrap import LedgerConfig
 from faultledger.service.config import config_path, load_settings
-from faultledger.service.exports import Writer, write_csv, write_jsonl
+from faultledger.service.exports import Tagged, Writer, write_csv, write_jsonl
+from faultledger.service.fleet import Fleet
 from faultledger.service.ledger import FaultLedger
 from faultledger.service.output_files import OutputFileError, check_target, open_text_output
 from faultledger.store.event_log import StoredRecord
@@ -115,6 +118,10 @@ def history(
     force: Annotated[bool, typer.Option(
         "--force", help="Replace an existing --output file.")] = False,
     wide: WideOption = False,
+    robot: RobotOption = None,
+    ledger_id: Annotated[str | None, typer.Option(
+        "--ledger", metavar="ID",
+        help="With --robot: only this log of the robot (its ledger_id).")] = None,
     shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
@@ -141,6 +148,11 @@ def history(
         "until": parse_time(until, "--until", setup.calendar, upper=True),
         "kinds": kind or (), "limit": limit, "from_seq": from_seq, "to_seq": to_seq,
     }
+    if ledger_id is not None and robot is None:
+        _fail("--ledger needs --robot NAME (a fleet central's copy of that robot's log)")
+    if robot is not None:
+        _robot_history(setup, robot, ledger_id, filters, chosen, wide, output, force)
+        return
     with opened(setup) as ledger:
         if chosen is Format.table:
             records = ledger.history(**filters)
@@ -151,6 +163,33 @@ def history(
         rows = export_history(ledger, **filters)
         writer = write_csv if chosen is Format.csv else write_jsonl
         count = _export(rows, writer, ledger.identity, output, force)
+    if output is not None:
+        render.console(stderr=True).print(cell(f"wrote {count} records to {output}"))
+
+
+def _robot_history(setup: LedgerConfig, robot: str, ledger_id: str | None,
+                   filters: dict[str, Any], chosen: Format, wide: bool, output: Path | None,
+                   force: bool) -> None:
+    """``history --robot``: the robot's logs as a fleet central holds them, each exactly as
+    the robot's own history gives it, log after log (a table per log)."""
+    with opened(setup) as central, Fleet(central) as robot_logs:
+        try:
+            chains = robot_logs.chains_of(robot, ledger_id)
+        except FaultLedgerError as error:
+            _fail(str(error))
+        if chosen is Format.table:
+            out = render.console(wide=wide)
+            for chain in chains:
+                with robot_logs.log(chain) as ledger:
+                    records = ledger.history(**filters)
+                out.print(cell(f"robot {chain.robot_id}, log {chain.ledger_id}"))
+                out.print(render.history_table(records, setup.calendar,
+                                               render.fit_width(out, wide)))
+            return
+        rows = (Tagged(identity, row) for identity, row in robot_logs.history(
+            robot, ledger_id, **filters))
+        writer = write_csv if chosen is Format.csv else write_jsonl
+        count = _export(rows, writer, None, output, force)
     if output is not None:
         render.console(stderr=True).print(cell(f"wrote {count} records to {output}"))
 
@@ -180,6 +219,7 @@ def verify(
         "with (default: the config's anchors.public_key).")] = None,
     central: CentralOption = None,
     token_file: TokenFileOption = None,
+    robot: RobotOption = None,
     as_json: JsonOption = False,
     shifts: ShiftsOption = None,
     db: DbOption = None,
@@ -197,6 +237,12 @@ def verify(
               "not both")
     _check_seq_range(from_seq, to_seq)
     anchor_paths, trusted = _anchor_inputs(anchor_file, public_key, config)
+    if robot is not None:
+        if (from_seq, to_seq, since, until, central) != (None,) * 5:
+            _fail("--robot checks every log of the robot whole: no range, no --central")
+        _verify_robot(prepare(db, config, shifts=shifts), robot, anchor_paths, trusted,
+                      as_json)
+        return
     matched: list[AnchorCheck] = []
     if token_file is not None and central is None:
         _fail("--token-file needs --central URL")
@@ -263,6 +309,52 @@ def verify(
         if witness is not None:
             render.say(central_line(witness))
     if not report_.ok:
+        raise typer.Exit(1)
+
+
+def _verify_robot(setup: LedgerConfig, robot: str, anchor_paths: list[Path],
+                  trusted: Any, as_json: bool) -> None:
+    """``verify --robot``: every log of the robot a fleet central holds, checked as the
+    robot's own verify checks it (chain, head, projections and statistics equal to a full
+    replay), and anchors signed on the robot against each log they belong to."""
+    results: list[dict[str, Any]] = []
+    ok = True
+    with opened(setup, verifying=True) as central, Fleet(central) as robot_logs:
+        try:
+            chains = robot_logs.chains_of(robot)
+        except FaultLedgerError as error:
+            _fail(str(error))
+        for chain in chains:
+            with robot_logs.log(chain) as ledger:
+                report_ = ledger.verify()
+                matched: list[AnchorCheck] = []
+                # Anchors signed on the robot belong to the log it writes now: its newest.
+                if trusted is not None and anchor_paths and chain is chains[-1]:
+                    anchored = verify_anchors(ledger, anchor_paths, trusted)
+                    report_, matched = with_anchors(report_, anchored), anchored.matched
+            ok = ok and report_.ok
+            results.append({"robot_id": chain.robot_id, "ledger_id": chain.ledger_id,
+                            "ok": report_.ok, "records": report_.records,
+                            "head_seq": report_.head_seq, "head_hash": report_.head_hash,
+                            "first_bad_seq": report_.first_bad_seq,
+                            "problems": report_.problems,
+                            "anchors": [str(m.path) for m in matched]})
+    if as_json:
+        typer.echo(json.dumps({"ok": ok, "robot_id": robot, "logs": results}, indent=2))
+    else:
+        for found in results:
+            where = f"robot {found['robot_id']}, log {found['ledger_id']}"
+            if found["ok"]:
+                render.say(f"OK: {where}: {found['records']} records, chain intact, "
+                           f"projections equal a full replay; head seq {found['head_seq']} "
+                           f"hash {found['head_hash']}"
+                           + "".join(f"; anchor {a} matches" for a in found["anchors"]))
+            else:
+                for problem in found["problems"]:
+                    render.complain("FAILED:", f"{where}: {problem}")
+                if found["first_bad_seq"] is not None:
+                    typer.echo(f"first bad seq: {found['first_bad_seq']}")
+    if not ok:
         raise typer.Exit(1)
 
 
@@ -355,8 +447,8 @@ def log_prefix(ledger: FaultLedger, moment: datetime | int, calendar: ShiftCalen
 
 # -- export ----------------------------------------------------------------------------------
 
-def _export(rows: Iterator[StoredRecord], write: Writer, identity: LedgerIdentity | None,
-            output: Path | None, force: bool = False) -> int:
+def _export(rows: Iterator[StoredRecord] | Iterator[Tagged], write: Writer,
+            identity: LedgerIdentity | None, output: Path | None, force: bool = False) -> int:
     """Stream rows out. A file appears only once complete (cli/output_files.py: a temporary
     file of its own beside it, then renamed; an existing one only replaced with ``force``)."""
     if output is None:

@@ -22,6 +22,8 @@ from faultledger.cli.options import (
     ConfigOption,
     DbOption,
     JsonOption,
+    LedgerConfig,
+    RobotOption,
     Role,
     ShiftsOption,
     WideOption,
@@ -36,6 +38,7 @@ from faultledger.cli.safe_text import cell, printable
 from faultledger.domain.clock import from_ns
 from faultledger.domain.types import FaultStatus, Severity
 from faultledger.errors import FaultLedgerError
+from faultledger.service.fleet import Fleet
 from faultledger.store import migrate
 from faultledger.store.database import Database, describe
 from faultledger.version import version
@@ -131,6 +134,7 @@ def list_faults(
     ] = None,
     as_json: JsonOption = False,
     wide: WideOption = False,
+    robot: RobotOption = None,
     shifts: ShiftsOption = None,
     db: DbOption = None,
     config: ConfigOption = None,
@@ -146,6 +150,11 @@ def list_faults(
     calendar = setup.calendar
     moment = None if at is None else parse_moment(at, "--at", calendar)
     notes: list[str] = []
+    if robot is not None:
+        if moment is not None:
+            fail("--at and --robot do not combine: --at reads this log's own records")
+        _list_robot(setup, robot, status, all_statuses, severity, as_json, wide)
+        return
     with opened(setup) as ledger:
         if moment is not None:
             prefix = audit.log_prefix(ledger, moment, calendar)
@@ -163,6 +172,31 @@ def list_faults(
         out.print(render.faults_table(faults, title, calendar, render.fit_width(out, wide)))
     for note in notes:
         render.note(note)
+
+
+def _list_robot(setup: LedgerConfig, robot: str, status: list[str] | None, all_statuses: bool,
+                severity: str | None, as_json: bool, wide: bool) -> None:
+    """``list --robot``: a robot's faults as a fleet central holds its logs (a table per
+    log; JSON items carry robot_id and ledger_id)."""
+    statuses = ([s.value for s in FaultStatus] if all_statuses
+                else [name.strip().upper() for name in status or []])
+    wanted_severity = None if severity is None else parse_severity(severity)
+    with opened(setup) as central, Fleet(central) as robot_logs:
+        try:
+            found = robot_logs.faults(robot, statuses, wanted_severity)
+            chains = robot_logs.chains_of(robot)
+        except FaultLedgerError as error:
+            fail(str(error))
+    if as_json:
+        typer.echo(json.dumps([{"robot_id": item.robot_id, "ledger_id": item.ledger_id,
+                                **render.fault_dict(item.fault)} for item in found], indent=2))
+        return
+    out = render.console(wide=wide)
+    for chain in chains:
+        faults = [item.fault for item in found if item.ledger_id == chain.ledger_id]
+        out.print(render.faults_table(faults, f"faults of robot {chain.robot_id}, log "
+                                      f"{chain.ledger_id}", setup.calendar,
+                                      render.fit_width(out, wide)))
 
 
 @app.command()

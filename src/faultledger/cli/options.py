@@ -24,9 +24,23 @@ from faultledger.service.bootstrap import LedgerConfig, Role, open_ledger, resol
 from faultledger.service.config import Settings, config_path, load_settings
 from faultledger.service.ledger import FaultLedger
 
-__all__ = ["HELP_MARKUP", "ConfigOption", "DbOption", "JsonOption", "LedgerConfig", "Role",
-           "ShiftsOption", "WideOption", "fail", "opened", "parse_moment", "parse_time",
-           "prepare", "settings_for"]
+__all__ = [
+    "HELP_MARKUP",
+    "ConfigOption",
+    "DbOption",
+    "JsonOption",
+    "LedgerConfig",
+    "RobotOption",
+    "Role",
+    "ShiftsOption",
+    "WideOption",
+    "fail",
+    "opened",
+    "parse_moment",
+    "parse_time",
+    "prepare",
+    "settings_for",
+]
 
 HELP_MARKUP = None
 """`--help` as click formats it: paragraphs rewrapped to the terminal (docstring line breaks
@@ -62,6 +76,11 @@ TIME_HELP = ("a shift id (2026-11-21/night), a date (2026-11-21) or a date-time 
              "(2026-11-21T22:00, in the calendar's zone unless it has Z or an offset); "
              "see docs/cli.md, Times")
 """The time grammar in one phrase, for `--help` texts."""
+
+
+RobotOption = Annotated[str | None, typer.Option(
+    "--robot", metavar="NAME",
+    help="On a fleet central: that robot's logs, as the robot itself gives them.")]
 
 
 def fail(message: str, code: int = 2) -> NoReturn:

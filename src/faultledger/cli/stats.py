@@ -21,21 +21,25 @@ from faultledger.cli.options import (
     TIME_HELP,
     ConfigOption,
     DbOption,
+    RobotOption,
     ShiftsOption,
     WideOption,
     fail,
     opened,
     parse_time,
     prepare,
+    settings_for,
 )
 from faultledger.cli.render import Column, Entry, Short, fitted
 from faultledger.cli.safe_text import cell, printable
 from faultledger.cli.shift_report import terminal
+from faultledger.domain.fleet_stats import FLEET_KEYS
 from faultledger.domain.periods import PERIOD_KINDS
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import GROUP_KEYS, StatsRow
 from faultledger.reports.shift import build_report, duration, group_text
 from faultledger.service.exports import stats_csv
+from faultledger.service.fleet import Fleet
 from faultledger.service.output_files import OutputFileError, check_target, write_output
 
 AsOfOption = Annotated[
@@ -66,7 +70,10 @@ def stats(
     group_by: Annotated[list[str] | None, typer.Option(
         "--group-by", metavar="KEY",
         help=f"Group rows by {', '.join(GROUP_KEYS)} (repeatable; action: "
-        "goal outcomes per action, with source only).")] = None,
+        "goal outcomes per action, with source only); on a fleet central also by "
+        f"{', '.join(FLEET_KEYS)} (the robots' logs; line and site from the config's "
+        "fleet.robots).")] = None,
+    robot: RobotOption = None,
     since: Annotated[str | None, typer.Option(
         "--since", metavar="TIME",
         help=f"Start (inclusive): {TIME_HELP}. Default: 24 hours before --until.")] = None,
@@ -96,8 +103,17 @@ def stats(
     first = parse_time(since, "--since", calendar)
     last = parse_time(until, "--until", calendar, upper=True)
     moment = _as_of(as_of, calendar)
+    fleet_wide = robot is not None or any(key in FLEET_KEYS for key in groups)
     with opened(setup) as ledger:
-        rows = ledger.stats(by, first, last, code, groups, calendar=calendar, as_of=moment)
+        if fleet_wide:
+            settings = settings_for(config)
+            with Fleet(ledger) as robot_logs:
+                rows = robot_logs.stats(
+                    by, first, last, code, groups, robot=robot, as_of=moment,
+                    labels=settings.fleet.labels() if settings.fleet else None)
+        else:
+            rows = ledger.stats(by, first, last, code, groups, calendar=calendar,
+                                as_of=moment)
     if as_json:
         typer.echo(json.dumps([row.as_dict() for row in rows], indent=2))
     elif as_csv:
@@ -105,6 +121,13 @@ def stats(
     else:
         out = render.console(wide=wide)
         out.print(stats_table(rows, by, groups, calendar, code, render.fit_width(out, wide)))
+        if any(row.complete is False for row in rows):
+            render.say(PROVISIONAL_NOTE)
+
+
+PROVISIONAL = "*"
+PROVISIONAL_NOTE = ("* provisional: a robot in the row has not pushed past the period's end "
+                    "yet (still syncing: figures may grow)")
 
 
 FIGURES = ("e-stops", "aborted goals", "activations", "failed", "confirmations", "heals",
@@ -124,6 +147,14 @@ def _figures(row: StatsRow) -> dict[str, str]:
             "chattering": str(row.chattering_codes), "stale": str(row.stale_codes),
             "canceled goals": str(row.canceled_goals),
             "succeeded goals": str(row.succeeded_goals)}
+
+
+def _group_cell(row: StatsRow, key: str) -> str:
+    """A group key as shown; a robot with a replaced database has a row per log, told apart
+    by the start of its ledger_id."""
+    text = group_text(row, key)
+    ledger_id = row.group.get("ledger_id")
+    return f"{text} ({str(ledger_id)[:8]})" if key == "robot" and ledger_id else text
 
 
 def local_span(row: StatsRow, calendar: ShiftCalendar) -> Short:
@@ -161,7 +192,8 @@ def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
         title += f", codes {' '.join(codes)}"
     goals_only = "action" in group_by
     # Rows grouped by fault keys only (code, source, severity) have no goal figures.
-    figures = (GOAL_FIGURES if goals_only else FIGURES if not group_by
+    fault_keys = [key for key in group_by if key not in FLEET_KEYS]
+    figures = (GOAL_FIGURES if goals_only else FIGURES if not fault_keys
                else tuple(name for name in FIGURES if name != "aborted goals"))
     # Dropped first: the last figure, then the others right to left; then the local time
     # (shortened first), then long ids of the groups are shortened; the first four figures go
@@ -178,8 +210,9 @@ def stats_table(rows: Sequence[StatsRow], by: str, group_by: Sequence[str],
     table_rows: list[list[Entry]] = []
     for row in rows:
         values = _figures(row)
-        groups = [group_text(row, key) for key in group_by]
-        table_rows.append([cell(row.period.id), local_span(row, calendar),
+        groups = [_group_cell(row, key) for key in group_by]
+        mark = PROVISIONAL if row.complete is False else ""
+        table_rows.append([cell(row.period.id + mark), local_span(row, calendar),
                            *(Short(cell(text), cell(render.shorten(text))) for text in groups),
                            *(values[name] for name in figures)])
     if not rows:

@@ -63,7 +63,8 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
     try:
         try:
             server = HttpServer(ledger, settings.http, ledger_config.calendar, listen,
-                                read_only=read_only)
+                                read_only=read_only,
+                                fleet_labels=settings.fleet.labels() if settings.fleet else None)
         except FaultLedgerError as error:
             fail(str(error))
         # The config's fleet: push this log to a central, as `sync --follow` does (a

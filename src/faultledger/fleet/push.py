@@ -552,8 +552,8 @@ class PusherThread:
                   ) -> PusherThread | None:
         """A server's pusher (the config's ``fleet:``), started; None without one. Its lines
         go to the server's console; a bad URL or token file is a ConfigError now."""
-        if settings is None:
-            return None
+        if settings is None or settings.central is None or settings.token_file is None:
+            return None  # no push configured (a central's fleet: has robot labels only)
         pusher = cls.for_ledger(ledger, settings.central, settings.token_file,
                                 LogReporter(print_line))
         pusher.start()

@@ -39,7 +39,8 @@ DOCS_ASSETS = "/static-offline-docs"
 
 def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalendar,
                tokens: TokenBook, *, hosts: AllowedHosts, read_only: bool = False,
-               loopback: bool = True) -> FastAPI:
+               loopback: bool = True,
+               fleet_labels: dict[str, dict[str, str]] | None = None) -> FastAPI:
     """``tokens`` are those in force at start; while the app runs a ``TokenWatcher`` follows
     the token file. ``loopback``: the server listens on loopback only, so it is open (every
     request anonymous) whenever no token is configured. ``hosts``: the Host values answered
@@ -48,7 +49,7 @@ def create_app(ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalen
     authorizer = Authorizer(tokens, open_without_tokens=loopback)
     heavy = HeavyReads(settings.heavy_reads, settings.heavy_queue, settings.heavy_wait_sec)
     context = Context(ledger, settings, calendar, authorizer, hub, read_only, heavy,
-                      fleet=Fleet(ledger))
+                      fleet=Fleet(ledger), fleet_labels=fleet_labels or {})
     watcher = TokenWatcher(settings, authorizer.replace)
 
     @asynccontextmanager

@@ -65,7 +65,8 @@ class HttpServer:
     """uvicorn over an open ledger, in the foreground (``run``) or a thread (``start``)."""
 
     def __init__(self, ledger: FaultLedger, settings: HttpSettings, calendar: ShiftCalendar,
-                 listen: str | None = None, *, read_only: bool = False) -> None:
+                 listen: str | None = None, *, read_only: bool = False,
+                 fleet_labels: dict[str, dict[str, str]] | None = None) -> None:
         self.host, self.port = parse_listen(listen or settings.listen)
         tokens = TokenBook(configured(settings))
         check_exposure(self.host, tokens)
@@ -75,7 +76,8 @@ class HttpServer:
         try:
             hosts = AllowedHosts(self.host, self.port, settings.allowed_hosts)
             self.app = create_app(ledger, settings, calendar, tokens, hosts=hosts,
-                                  read_only=read_only, loopback=is_loopback(self.host))
+                                  read_only=read_only, loopback=is_loopback(self.host),
+                                  fleet_labels=fleet_labels)
         except BaseException:
             self._socket.close()
             raise

@@ -283,7 +283,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
         if http_listen is not None:
             # The same ledger: one writer for ROS and HTTP (docs/http.md).
             web = HttpServer(ledger, settings.http, config.calendar, http_listen,
-                             read_only=follower)
+                             read_only=follower,
+                             fleet_labels=settings.fleet.labels() if settings.fleet else None)
             web.start()
         restored = ledger.restored
         mode = f" follower of {leader} (read-only)" if follower else ""

@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import re
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from faultledger.domain import validation
 from faultledger.domain.policy import Policy
@@ -132,17 +140,46 @@ class HttpSettings(BaseModel):
     per-minute sums cannot answer: with code or group_by)."""
 
 
-class FleetSettings(BaseModel):
-    """This robot's push to a fleet central (docs/fleet.md, "Robot side"): `serve` and `http`
-    keep the central caught up with the log on a thread of their own, like `sync --follow`."""
+class RobotLabels(BaseModel):
+    """Where a robot works: what a central's statistics group by (``--group-by line``)."""
 
     model_config = ConfigDict(extra="forbid")
 
-    central: str = Field(pattern=r"^https?://[^\s/?#]+[^\s?#]*$", max_length=2048)
+    line: str = Field(default="", max_length=128)
+    site: str = Field(default="", max_length=128)
+
+
+class FleetSettings(BaseModel):
+    """A robot's push to a fleet central (docs/fleet.md, "Robot side"): with ``central`` and
+    ``token_file``, `serve` and `http` keep the central caught up with the log on a thread of
+    their own, like `sync --follow`. On the central, ``robots`` labels each robot with its
+    line and site."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    central: str | None = Field(default=None, pattern=r"^https?://[^\s/?#]+[^\s?#]*$",
+                                max_length=2048)
     """The central's base URL (http://HOST:PORT or https://…, a path allowed)."""
-    token_file: Path
+    token_file: Path | None = None
     """The file holding this robot's token (what `token create --role robot` printed on the
     central); relative to the working directory."""
+    robots: dict[str, RobotLabels] = Field(default_factory=dict)
+    """On a central: robot_id → {line, site}."""
+
+    @model_validator(mode="after")
+    def _both_or_neither(self) -> FleetSettings:
+        if (self.central is None) != (self.token_file is None):
+            raise ValueError("fleet.central and fleet.token_file go together: the central to "
+                             "push to and the robot token it accepts")
+        for robot_id in self.robots:
+            if not re.match(r"^[A-Za-z0-9_.-]{1,128}$", robot_id):
+                raise ValueError(f"fleet.robots: {robot_id!r} is not a robot_id (1 to 128 "
+                                 "letters, digits, '_', '.' or '-')")
+        return self
+
+    def labels(self) -> dict[str, dict[str, str]]:
+        return {robot: {"line": found.line, "site": found.site}
+                for robot, found in self.robots.items()}
 
 
 class Settings(BaseModel):

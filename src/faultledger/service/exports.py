@@ -8,9 +8,9 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import fields
-from typing import Any, TextIO
+from typing import Any, NamedTuple, TextIO
 
 from faultledger.domain.clock import iso_ns
 from faultledger.domain.identity import LedgerIdentity
@@ -47,26 +47,42 @@ def export_row(record: StoredRecord, identity: LedgerIdentity | None = None
     }
 
 
-Writer = Callable[[Iterable[StoredRecord], TextIO, LedgerIdentity | None], int]
+class Tagged(NamedTuple):
+    """A record of one of several logs (a fleet central's export of a robot's logs), with
+    that log's identity."""
+
+    identity: LedgerIdentity
+    record: StoredRecord
 
 
-def write_jsonl(rows: Iterable[StoredRecord], out: TextIO,
-                identity: LedgerIdentity | None = None) -> int:
+Rows = Iterable[StoredRecord] | Iterable[Tagged]
+Writer = Callable[[Rows, TextIO, LedgerIdentity | None], int]
+
+
+def _tagged(rows: Rows, identity: LedgerIdentity | None
+            ) -> Iterator[tuple[LedgerIdentity | None, StoredRecord]]:
+    for item in rows:
+        if isinstance(item, Tagged):
+            yield item.identity, item.record
+        else:
+            yield identity, item
+
+
+def write_jsonl(rows: Rows, out: TextIO, identity: LedgerIdentity | None = None) -> int:
     count = 0
-    for record in rows:
-        out.write(json.dumps(export_row(record, identity), ensure_ascii=False) + "\n")
+    for found, record in _tagged(rows, identity):
+        out.write(json.dumps(export_row(record, found), ensure_ascii=False) + "\n")
         count += 1
     return count
 
 
-def write_csv(rows: Iterable[StoredRecord], out: TextIO,
-              identity: LedgerIdentity | None = None) -> int:
+def write_csv(rows: Rows, out: TextIO, identity: LedgerIdentity | None = None) -> int:
     """CSV with a header; NULL is an empty cell; payload is the stored canonical JSON text."""
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(EXPORT_COLUMNS)
-    robot_id, ledger_id = identity or ("", "")
     count = 0
-    for r in rows:
+    for found, r in _tagged(rows, identity):
+        robot_id, ledger_id = found or ("", "")
         writer.writerow([r.seq, r.event_id, r.kind, r.fault_code or "", r.source_id or "",
                          iso_ns(r.occurred_at_ns), r.occurred_at_ns, iso_ns(r.recorded_at_ns),
                          r.recorded_at_ns, r.schema_version, r.payload_json,

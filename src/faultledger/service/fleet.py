@@ -325,6 +325,10 @@ class Fleet:
         log_keys = [key for key in wanted if key not in FLEET_KEYS]
         labels = labels or {}
         chains = self.chains_of(robot) if robot is not None else self.chains()
+        if not chains:
+            raise InvalidInputError(
+                f"group_by {', '.join(fleet_keys)} needs a fleet central: this database holds "
+                "no robot logs (robots push theirs with `faultledger sync`)")
         several: dict[str, int] = {}
         for chain in chains:
             several[chain.robot_id] = several.get(chain.robot_id, 0) + 1
