@@ -28,7 +28,7 @@ from collections.abc import Iterator, Sequence
 from functools import lru_cache
 from typing import Any
 
-from sqlalchemy import Connection, Engine, Table, event, exc
+from sqlalchemy import Connection, Engine, MetaData, Table, event, exc
 from sqlalchemy.dialects import postgresql, sqlite
 
 from faultledger.errors import (
@@ -70,6 +70,17 @@ class DialectRules:
 
     def driver_errors(self) -> tuple[type[BaseException], ...]:
         return ()
+
+    def upsert_rows(self, conn: Connection, table: Table, columns: Sequence[str],
+                    rows: Sequence[Sequence[Any]], upsert_sql: str) -> None:
+        """Many rows through ``upsert_sql`` (INSERT … VALUES … ON CONFLICT …): executemany."""
+        driver: Any = conn.connection.driver_connection
+        cursor = driver.cursor()
+        try:
+            cursor.executemany(upsert_sql, [dict(zip(columns, row, strict=True))
+                                            for row in rows])
+        finally:
+            cursor.close()
 
     def classify(self, where: str, text: str, error: BaseException) -> StoreError | None:
         return None
@@ -168,6 +179,25 @@ class PostgreSQLRules(DialectRules):
     def insert_rows(self, conn: Connection, table: Table, columns: Sequence[str],
                     rows: Sequence[Sequence[Any]]) -> None:
         _copy_rows(conn, table, columns, rows)
+
+    def upsert_rows(self, conn: Connection, table: Table, columns: Sequence[str],
+                    rows: Sequence[Sequence[Any]], upsert_sql: str) -> None:
+        """COPY into a temporary table, then one INSERT … SELECT … ON CONFLICT (the same
+        conflict clause): a batch's rows in two statements instead of one each (the rows of
+        one batch have distinct keys, as ON CONFLICT … DO UPDATE requires)."""
+        staging = f"faultledger_staging_{table.name}"
+        driver: Any = conn.connection.driver_connection
+        with driver.cursor() as cursor:
+            cursor.execute(f"CREATE TEMP TABLE IF NOT EXISTS {staging} (LIKE {table.name}) "
+                           "ON COMMIT DELETE ROWS")
+        _copy_rows(conn, Table(staging, MetaData()), columns, rows)
+        start = upsert_sql.index(" VALUES (")
+        end = upsert_sql.index(") ON CONFLICT ", start)
+        listed = ", ".join(columns)
+        sql = (f"{upsert_sql[:upsert_sql.index('(', 0, start)]}({listed}) SELECT {listed} "
+               f"FROM {staging}{upsert_sql[end + 1:]}")
+        with driver.cursor() as cursor:
+            cursor.execute(sql)
 
     def driver_errors(self) -> tuple[type[BaseException], ...]:
         try:

@@ -75,11 +75,25 @@ def execute_many(conn: Connection, statement: ClauseElement,
         rules_for(conn.dialect.name).insert_rows(conn, table, columns, tuples)
         return
     prepared = prepare(statement, conn.dialect)
+    if (len(rows) >= BULK_UPSERT_ROWS and conn.dialect.name != "sqlite"
+            and isinstance(statement, Insert) and " ON CONFLICT " in prepared.sql):
+        table = statement.table
+        columns = tuple(rows[0])
+        pick = itemgetter(*columns)
+        tuples = [pick(row) for row in rows] if len(columns) > 1 else [
+            (row[columns[0]],) for row in rows]
+        rules_for(conn.dialect.name).upsert_rows(conn, table, columns, tuples,
+                                                 prepared.sql)
+        return
     cursor = _cursor(conn)
     try:
         cursor.executemany(prepared.sql, prepared.params_many(rows))
     finally:
         cursor.close()
+
+
+BULK_UPSERT_ROWS = 64
+"""From this many rows an upsert on PostgreSQL goes through COPY into a temporary table."""
 
 
 def _plain_insert(statement: ClauseElement) -> bool:
