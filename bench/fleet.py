@@ -4,7 +4,7 @@ What it measures (docs/performance.md, "Fleet"), each against a baseline in the 
 
 - **push**: ROBOTS processes, each holding a real robot log (SQLite, RECORDS records made
   through ``FaultLedger.report``), push it to a central (``faultledger http --db
-  postgresql+psycopg://…``) in batches of 500 over HTTP, as ``faultledger sync`` does, all
+  postgresql+psycopg://…``) in batches of 1,000 over HTTP, as ``faultledger sync`` does, all
   at once. Figures: records/s into the central (all records / wall time from the first push
   to the last answer), p99 of one batch's acknowledgement. Baseline: the same rows written with
   one ``COPY`` per batch (psycopg) into a table of the same columns in the same PostgreSQL, from
@@ -47,8 +47,8 @@ from faultledger import FaultLedger, Policy
 from faultledger.domain.clock import to_ns
 from faultledger.service.audit import export_history
 
-BATCH = 500
-"""Records per push, as `faultledger sync` sends them."""
+BATCH = 1_000
+"""Records per push, the most `faultledger sync` sends (docs/fleet.md)."""
 READY = re.compile(r"faultledger http ready.*?: (http://[0-9.:]+/)")
 COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "payload", "occurred_at_ns",
            "recorded_at_ns", "schema_version", "hash")
