@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
@@ -172,9 +171,9 @@ class FleetSettings(BaseModel):
             raise ValueError("fleet.central and fleet.token_file go together: the central to "
                              "push to and the robot token it accepts")
         for robot_id in self.robots:
-            if not re.match(r"^[A-Za-z0-9_.-]{1,128}$", robot_id):
-                raise ValueError(f"fleet.robots: {robot_id!r} is not a robot_id (1 to 128 "
-                                 "letters, digits, '_', '.' or '-')")
+            problem = validation.robot_id_error(robot_id)
+            if problem:
+                raise ValueError(f"fleet.robots: {problem}")
         return self
 
     def labels(self) -> dict[str, dict[str, str]]:
