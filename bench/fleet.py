@@ -227,7 +227,8 @@ def synthetic_log(robot_id: str, records: int, days: int, seed: int
     return ledger_id, out
 
 
-def stats_part(server: pg_server.PostgresServer, robots: int, records: int) -> None:
+def stats_part(server: pg_server.PostgresServer, robots: int, records: int,
+               open_logs: int = 32) -> None:
     import psycopg
 
     from faultledger.service.fleet import Fleet, PushBatch
@@ -239,7 +240,8 @@ def stats_part(server: pg_server.PostgresServer, robots: int, records: int) -> N
                      "fault_code text, payload text, occurred_at_ns bigint)")
     started = time.monotonic()
     first = None
-    with FaultLedger.open(url, background=False) as central, Fleet(central) as fleet:
+    with FaultLedger.open(url, background=False) as central, \
+            Fleet(central, open_logs=open_logs) as fleet:
         for n in range(robots):
             robot_id = f"robot-{n:03d}"
             ledger_id, log = synthetic_log(robot_id, records, 30, n)
@@ -293,11 +295,13 @@ def main() -> int:
     parser.add_argument("--part", choices=["push", "stats", "all"], default="all")
     parser.add_argument("--stats-robots", type=int, default=100)
     parser.add_argument("--stats-records", type=int, default=50_000)
+    parser.add_argument("--open-logs", type=int, default=32,
+                        help="robot logs the central keeps open (Fleet open_logs)")
     args = parser.parse_args()
     if args.part == "stats":
         header(f"fleet statistics: {args.stats_robots} robots × {args.stats_records:,} records")
         with pg_server.running() as server:
-            stats_part(server, args.stats_robots, args.stats_records)
+            stats_part(server, args.stats_robots, args.stats_records, args.open_logs)
         return 0
     header(f"fleet push: {args.robots} robots × {args.records:,} records into a PostgreSQL "
            "central")
@@ -358,7 +362,7 @@ def main() -> int:
           f"{ratio(single_rate, raw_single_rate):.2f}× raw psycopg inserts (no target)")
     if args.part == "all":
         with pg_server.running() as server:
-            stats_part(server, args.stats_robots, args.stats_records)
+            stats_part(server, args.stats_robots, args.stats_records, args.open_logs)
     return 0
 
 
