@@ -45,6 +45,7 @@ from faultledger.service.ledger import FaultLedger
 from faultledger.service.results import VerifyReport
 from faultledger.service.writer import Import, Imported
 from faultledger.store import fleet_log
+from faultledger.store.database import Database
 from faultledger.store.event_log import StoredRecord
 
 __all__ = ["MAX_BATCH_RECORDS", "MAX_HASH_PAGE", "ChainStatus", "Fleet", "PushAnswer",
@@ -157,7 +158,8 @@ class Fleet:
                         held.users += 1
                 if held is None:
                     url = fleet_log.chain_url(self.central.url, chain.chain_id)
-                    ledger = FaultLedger.open(url, background=False)
+                    ledger = FaultLedger.open(url, background=False,
+                                              database=self._database(chain))
                     with self._lock:
                         held = self._logs[chain.chain_id] = _Open(ledger)
                         held.users += 1
@@ -168,6 +170,23 @@ class Fleet:
             with self._lock:
                 held.users -= 1
             self._evict()
+
+    def _database(self, chain: fleet_log.Chain) -> Database:
+        """Where a robot log lives: on PostgreSQL its schema, through the central's own pool
+        (no engine or connection of its own); on SQLite its own file."""
+        url = fleet_log.chain_url(self.central.url, chain.chain_id)
+        if self.central._db.dialect == "postgresql":
+            return Database.within(self.central._db, url, fleet_log.schema(chain.chain_id))
+        return Database(url)
+
+    @contextlib.contextmanager
+    def _reading(self, chain: fleet_log.Chain) -> Iterator[Database]:
+        """A robot log's database for reads that need no ledger (statistics): no restore."""
+        db = self._database(chain)
+        try:
+            yield db
+        finally:
+            db.dispose()
 
     def _evict(self) -> None:
         """Close the least recently used idle logs beyond ``open_logs``."""
@@ -334,11 +353,11 @@ class Fleet:
             several[chain.robot_id] = several.get(chain.robot_id, 0) + 1
         merged: dict[tuple[object, ...], list[StatsRow]] = {}
         order: list[tuple[object, ...]] = []
+        query = statistics.StatsQuery(by, since, until, codes, log_keys, self.central.calendar,
+                                      as_of, self.central.estop_codes, budget)
         for chain in chains:
-            with self.log(chain) as ledger:
-                ledger.estop_codes = self.central.estop_codes
-                rows = ledger.stats(by, since, until, codes, log_keys,
-                                    calendar=self.central.calendar, as_of=as_of, budget=budget)
+            with self._reading(chain) as db:
+                rows = statistics.compute(db, query)
             robot_labels = labels.get(chain.robot_id, {})
             fleet_group: dict[str, str | int] = {
                 "robot": chain.robot_id, "line": robot_labels.get("line", ""),

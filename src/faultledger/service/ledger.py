@@ -117,7 +117,7 @@ class FaultLedger:
              upgrade: bool = True, create: bool = True, background: bool | None = None,
              calendar: ShiftCalendar | None = None,
              estop_codes: Sequence[str] | None = None,
-             robot_id: str | None = None) -> FaultLedger:
+             robot_id: str | None = None, database: Database | None = None) -> FaultLedger:
         """Open (create, migrate) the database and restore state: projections + log tail.
 
         With a ``policy`` this process is a serving writer: the policy is recorded when it
@@ -134,7 +134,7 @@ class FaultLedger:
             problem = validation.robot_id_error(robot_id)
             if problem is not None:
                 raise InvalidInputError(problem)
-        db = Database(url, create=create)
+        db = database if database is not None else Database(url, create=create)
         try:
             migrate.ensure_current(db, upgrade=upgrade)
             projector, events, replayed = restore(db)

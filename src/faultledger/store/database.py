@@ -38,6 +38,18 @@ def _sqlite_file(url: str) -> Path | None:
     return Path(database)
 
 
+CENTRAL_POOL = {"pool_size": 16, "max_overflow": 48}
+"""PostgreSQL: a fleet central reads and writes its robot logs through its own pool (a
+writer holds a connection per robot log it keeps open, docs/fleet.md)."""
+
+
+def _pool_for(url: str) -> dict[str, int]:
+    try:
+        return CENTRAL_POOL if make_url(url).get_backend_name() == "postgresql" else {}
+    except exc.ArgumentError:
+        return {}
+
+
 def schema_of(url: str) -> str | None:
     """The PostgreSQL schema a URL names (``?options=-csearch_path=NAME``), else None: a
     fleet central keeps each robot log in a schema of its own (store/fleet_log.py)."""
@@ -84,13 +96,29 @@ class Database:
             if create:
                 _create_private(self.path)
         try:
-            self.engine: Engine = create_engine(url)
+            self.engine: Engine = create_engine(url, **_pool_for(url))
         except (exc.ArgumentError, exc.NoSuchModuleError) as error:
             raise StoreError(f"invalid database URL {url!r}: {error}") from None
         self.dialect = self.engine.dialect.name
         self.rules: DialectRules = rules_for(self.dialect)
         self.rules.configure(self.engine)
         self.engine.update_execution_options(faultledger_lock_key=write_lock_key(url))
+        self._shared = False
+
+    @classmethod
+    def within(cls, parent: Database, url: str, schema: str) -> Database:
+        """A log in a schema of ``parent``'s PostgreSQL database (a fleet central's robot
+        log), through ``parent``'s connection pool: each transaction sets its search_path
+        and takes that log's own write lock. No engine and no connections of its own."""
+        found = cls.__new__(cls)
+        found.url = url
+        found.path = None
+        found.engine = parent.engine.execution_options(
+            faultledger_schema=schema, faultledger_lock_key=write_lock_key(url))
+        found.dialect = parent.dialect
+        found.rules = parent.rules
+        found._shared = True
+        return found
 
     @contextlib.contextmanager
     def reading(self) -> Iterator[Connection]:
@@ -109,7 +137,8 @@ class Database:
                 yield conn
 
     def dispose(self) -> None:
-        self.engine.dispose()
+        if not self._shared:  # a log within another database leaves the pool to it
+            self.engine.dispose()
 
 
 class WriteConnection:

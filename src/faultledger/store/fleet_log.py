@@ -73,8 +73,13 @@ def new_chain(conn: Connection, ledger_id: str, robot_id: str, now_ns: int) -> C
     found = chain_of(conn, ledger_id)
     assert found is not None
     if conn.dialect.name == "postgresql":
-        conn.execute(text(f'CREATE SCHEMA IF NOT EXISTS "{SCHEMA_PREFIX}{found.chain_id}"'))
+        conn.execute(text(f'CREATE SCHEMA IF NOT EXISTS "{schema(found.chain_id)}"'))
     return found
+
+
+def schema(chain_id: int) -> str:
+    """The PostgreSQL schema of a robot log."""
+    return f"{SCHEMA_PREFIX}{chain_id}"
 
 
 def chain_url(central_url: str, chain_id: int) -> str:
@@ -84,7 +89,7 @@ def chain_url(central_url: str, chain_id: int) -> str:
         options = url.query.get("options")
         kept = " ".join(options) if isinstance(options, tuple) else (options or "")
         words = [w for w in kept.split() if not w.startswith("-csearch_path=")]
-        words.append(f"-csearch_path={SCHEMA_PREFIX}{chain_id}")
+        words.append(f"-csearch_path={schema(chain_id)}")
         return url.update_query_dict({"options": " ".join(words)}).render_as_string(
             hide_password=False)
     database = url.database or ""
