@@ -23,6 +23,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from datetime import datetime
 
@@ -52,6 +53,8 @@ __all__ = ["MAX_BATCH_RECORDS", "MAX_HASH_PAGE", "ChainStatus", "Fleet", "PushAn
            "PushBatch", "RobotFault"]
 
 MAX_HASH_PAGE = 10_000
+STATS_THREADS = 2
+"""Robot logs whose statistics are computed at once (a central's statistics per robot)."""
 OPEN_LOGS = 32
 """Robot logs a central keeps open at once (each holds a database connection for its
 writer); more are opened and closed as they are used."""
@@ -355,9 +358,14 @@ class Fleet:
         order: list[tuple[object, ...]] = []
         query = statistics.StatsQuery(by, since, until, codes, log_keys, self.central.calendar,
                                       as_of, self.central.estop_codes, budget)
-        for chain in chains:
+        def compute(chain: fleet_log.Chain) -> list[StatsRow]:
             with self._reading(chain) as db:
-                rows = statistics.compute(db, query)
+                return statistics.compute(db, query)
+
+        # Two logs at a time: while one waits for the database the other is folded.
+        with ThreadPoolExecutor(STATS_THREADS, thread_name_prefix="faultledger-fleet") as pool:
+            computed = list(pool.map(compute, chains))
+        for chain, rows in zip(chains, computed, strict=True):
             robot_labels = labels.get(chain.robot_id, {})
             fleet_group: dict[str, str | int] = {
                 "robot": chain.robot_id, "line": robot_labels.get("line", ""),
