@@ -30,7 +30,7 @@ def merge(rows: Sequence[StatsRow], group: Mapping[str, str | int]) -> StatsRow:
     """One row for the same period from the rows of several logs."""
     first = rows[0]
     if len(rows) == 1:
-        return replace(first, group=dict(group))
+        return first if first.group == group else replace(first, group=dict(group))
     sums = {name: sum(getattr(row, name) for row in rows) for name in _SUMS}
     seconds = first.period_seconds
     repaired = [(row.mttr_seconds, row.repairs) for row in rows

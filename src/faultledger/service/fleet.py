@@ -355,6 +355,7 @@ class Fleet:
         for chain in chains:
             several[chain.robot_id] = several.get(chain.robot_id, 0) + 1
         merged: dict[tuple[object, ...], list[StatsRow]] = {}
+        ranks: dict[tuple[object, ...], tuple[object, ...]] = {}
         order: list[tuple[object, ...]] = []
         query = statistics.StatsQuery(by, since, until, codes, log_keys, self.central.calendar,
                                       as_of, self.central.estop_codes, budget)
@@ -380,10 +381,10 @@ class Fleet:
                 if key not in merged:
                     merged[key] = []
                     order.append(key)
+                    ranks[key] = (row.period.start, *(str(value) for value in group.values()))
                 merged[key].append(replace(row, group=group, complete=done))
-        found = [merge(merged[key], merged[key][0].group) for key in order]
-        found.sort(key=lambda row: (row.period.start, *(str(v) for v in row.group.values())))
-        return found
+        order.sort(key=ranks.__getitem__)  # periods in time order, then the group's values
+        return [merge(merged[key], merged[key][0].group) for key in order]
 
     def verify(self, robot_id: str, ledger_id: str | None = None) -> list[ChainCheck]:
         """``verify`` of every log of a robot as the central holds it: the hash chain, the
