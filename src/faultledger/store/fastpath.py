@@ -68,21 +68,13 @@ def execute_many(conn: Connection, statement: ClauseElement,
     if _plain_insert(statement) and conn.dialect.name != "sqlite":
         # PostgreSQL: COPY (store/dialects.py), several times faster than executemany.
         table: Any = statement.table  # type: ignore[attr-defined]
-        columns = tuple(rows[0])
-        pick = itemgetter(*columns)
-        tuples = [pick(row) for row in rows] if len(columns) > 1 else [
-            (row[columns[0]],) for row in rows]
-        rules_for(conn.dialect.name).insert_rows(conn, table, columns, tuples)
+        rules_for(conn.dialect.name).insert_rows(conn, table, *_columns_and_tuples(rows))
         return
     prepared = prepare(statement, conn.dialect)
     if (len(rows) >= BULK_UPSERT_ROWS and conn.dialect.name != "sqlite"
             and isinstance(statement, Insert) and " ON CONFLICT " in prepared.sql):
-        table = statement.table
-        columns = tuple(rows[0])
-        pick = itemgetter(*columns)
-        tuples = [pick(row) for row in rows] if len(columns) > 1 else [
-            (row[columns[0]],) for row in rows]
-        rules_for(conn.dialect.name).upsert_rows(conn, table, columns, tuples,
+        target: Any = statement.table
+        rules_for(conn.dialect.name).upsert_rows(conn, target, *_columns_and_tuples(rows),
                                                  prepared.sql)
         return
     cursor = _cursor(conn)
@@ -90,6 +82,16 @@ def execute_many(conn: Connection, statement: ClauseElement,
         cursor.executemany(prepared.sql, prepared.params_many(rows))
     finally:
         cursor.close()
+
+
+def _columns_and_tuples(rows: Sequence[Mapping[str, Any]]
+                        ) -> tuple[tuple[str, ...], list[tuple[Any, ...]]]:
+    """Rows of one shape as their column names and value tuples (what COPY writes)."""
+    columns = tuple(rows[0])
+    if len(columns) == 1:
+        return columns, [(row[columns[0]],) for row in rows]
+    pick = itemgetter(*columns)
+    return columns, [pick(row) for row in rows]
 
 
 BULK_UPSERT_ROWS = 64
