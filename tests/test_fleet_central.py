@@ -286,3 +286,36 @@ def test_faults_per_robot_are_each_robots_own_list(central: fleet.Fleet, tmp_pat
         held = central.faults(f"robot-{n}")
         assert [item.fault for item in held] == own and own
     assert {item.robot_id for item in central.faults()} == {"robot-0", "robot-1"}
+
+
+def test_a_push_is_answered_before_projection_and_every_read_sees_it(
+        db_url: str, tmp_path: Path) -> None:
+    url = robot_log(tmp_path / "a.db", "robot-a", 60)
+    robot_id, ledger_id, records = records_of(url)
+    with FaultLedger.open(db_url, policy=Policy(), background=False) as ledger, \
+            fleet.Fleet(ledger, quiet=60) as central:
+        central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records))
+        assert central.behind() == {ledger_id: len(records)}
+        with FaultLedger.open(url) as robot:
+            own = robot.list_faults()
+        assert [item.fault for item in central.faults(robot_id)] == own
+        assert central.behind() == {}
+
+
+def test_a_central_stopped_before_projecting_projects_at_its_next_start(
+        db_url: str, tmp_path: Path) -> None:
+    url = timed_robot_log(tmp_path / "a.db", "robot-a", 3)
+    robot_id, ledger_id, records = records_of(url)
+    since, until = "2026-11-20T00:00:00+00:00", "2026-11-21T06:00:00+00:00"
+    as_of = datetime(2026, 11, 22, tzinfo=UTC)
+    with FaultLedger.open(db_url, policy=Policy(), background=False) as ledger:
+        with fleet.Fleet(ledger, quiet=60) as central:
+            central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records))
+        with fleet.Fleet(ledger, quiet=60) as central:
+            at_central = central.stats("hour", since, until, group_by=["robot"], as_of=as_of)
+            [check] = central.verify(robot_id)
+        with FaultLedger.open(url) as robot:
+            robot.calendar = ledger.calendar
+            own = robot.stats("hour", since, until, as_of=as_of)
+    assert [figures(row) for row in at_central] == [figures(row) for row in own]
+    assert check.report.ok, check.report.problems

@@ -3,22 +3,24 @@ check it, keep it in that robot log's own copy; say how far behind each robot is
 robot's logs back.
 
 Each robot log the central receives is kept as a faultledger log of its own (store/fleet_log.py:
-a PostgreSQL schema, or a SQLite file beside the central's), written only by ``Import``
-(service/writer.py: records verbatim, projections and statistics as the robot computes
-them). So everything the central says about a robot is computed by the same code over the
-same records as on the robot, figure for figure.
+a PostgreSQL schema, or a SQLite file beside the central's): records verbatim, projections and
+statistics as the robot computes them. So everything the central says about a robot is
+computed by the same code over the same records as on the robot, figure for figure.
 
 A batch is checked whole before anything is stored (domain/fleet.py: every hash, the chain
-inside it, the identity), then by the log's own writer under its write lock against what it
-holds: a record held already must be the same (then it is ignored: a batch sent again after
-a lost answer), the first new one must continue the log. Logs of different robots are
-written concurrently (one write lock per log).
+inside it, the identity), then under the log's write lock against what it holds: a record
+held already must be the same (then it is ignored: a batch sent again after a lost answer),
+the first new one must continue the log. Logs of different robots are written concurrently
+(one write lock per log). The answer goes out once the records are committed; the log's
+projections follow behind (service/fleet_backlog.py), and every read that needs them brings
+them up first.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import logging
 import threading
 import time
 from collections import OrderedDict
@@ -40,17 +42,18 @@ from faultledger.domain.fleet import (
 from faultledger.domain.fleet_stats import FLEET_KEYS, merge
 from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.stat_rows import StatsRow
-from faultledger.errors import InvalidInputError
-from faultledger.service import audit, statistics
+from faultledger.errors import FaultLedgerError, InvalidInputError
+from faultledger.service import audit, fleet_backlog, restore, statistics
 from faultledger.service.ledger import FaultLedger
 from faultledger.service.results import VerifyReport
-from faultledger.service.writer import Import, Imported
-from faultledger.store import fleet_log
+from faultledger.store import event_log, fleet_log
 from faultledger.store.database import Database
 from faultledger.store.event_log import StoredRecord
 
 __all__ = ["MAX_BATCH_RECORDS", "MAX_HASH_PAGE", "ChainStatus", "Fleet", "PushAnswer",
            "PushBatch", "RobotFault"]
+
+log = logging.getLogger(__name__)
 
 MAX_HASH_PAGE = 10_000
 STATS_THREADS = 2
@@ -76,6 +79,20 @@ class PushAnswer:
     last_hash: str
     stored: int
     ignored: int
+
+
+@dataclass(frozen=True, slots=True)
+class Stored:
+    """What storing a batch did: how far the log now goes, or why nothing was stored
+    (``refused``: a docs/fleet.md error code, with the seq it names)."""
+
+    last_seq: int
+    last_hash: str
+    stored: int = 0
+    ignored: int = 0
+    refused: str | None = None
+    message: str = ""
+    seq: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,18 +141,28 @@ class _Open:
 class Fleet:
     """A central's robot logs: pushes in, status and reads out. Thread-safe; ``close`` it."""
 
-    def __init__(self, central: FaultLedger, open_logs: int = OPEN_LOGS) -> None:
+    def __init__(self, central: FaultLedger, open_logs: int = OPEN_LOGS, *,
+                 quiet: float = fleet_backlog.QUIET_SECONDS,
+                 max_lag: int = fleet_backlog.MAX_LAG) -> None:
         self.central = central
         self._open_logs = open_logs
         self._logs: OrderedDict[int, _Open] = OrderedDict()
         self._lock = threading.Lock()
         self._opening: dict[int, threading.Lock] = {}
+        self._databases: dict[int, Database] = {}
+        self._known: dict[int, fleet_log.Chain] = {}
+        self._entered: dict[str, fleet_log.Chain] = {}
+        self._backlog = fleet_backlog.Backlog(self._project, self._lagging, quiet, max_lag)
 
     def close(self) -> None:
+        self._backlog.close()
         with self._lock:
             logs, self._logs = list(self._logs.values()), OrderedDict()
+            databases, self._databases = list(self._databases.values()), {}
         for held in logs:
             held.ledger.close()
+        for db in databases:
+            db.dispose()
 
     def __enter__(self) -> Fleet:
         return self
@@ -146,7 +173,15 @@ class Fleet:
     # -- the logs ----------------------------------------------------------------------------
     @contextlib.contextmanager
     def log(self, chain: fleet_log.Chain) -> Iterator[FaultLedger]:
-        """The robot log of ``chain``, open while the caller uses it."""
+        """The robot log of ``chain``, open while the caller uses it, with every record
+        acknowledged so far projected."""
+        self._backlog.current(chain.chain_id)
+        with self._opened(chain) as ledger:
+            ledger.catch_up()
+            yield ledger
+
+    @contextlib.contextmanager
+    def _opened(self, chain: fleet_log.Chain) -> Iterator[FaultLedger]:
         with self._lock:
             held = self._logs.get(chain.chain_id)
             if held is not None:
@@ -182,14 +217,59 @@ class Fleet:
             return Database.within(self.central._db, url, fleet_log.schema(chain.chain_id))
         return Database(url)
 
-    @contextlib.contextmanager
-    def _reading(self, chain: fleet_log.Chain) -> Iterator[Database]:
-        """A robot log's database for reads that need no ledger (statistics): no restore."""
-        db = self._database(chain)
-        try:
-            yield db
-        finally:
-            db.dispose()
+    def _db(self, chain: fleet_log.Chain) -> Database:
+        """A robot log's database for work that needs no ledger (storing records,
+        projecting, statistics), kept for the next use."""
+        with self._lock:
+            found = self._databases.get(chain.chain_id)
+        if found is not None:
+            return found
+        made = self._database(chain)
+        with self._lock:
+            found = self._databases.setdefault(chain.chain_id, made)
+        if found is not made:
+            made.dispose()
+        return found
+
+    def _migrated(self, chain: fleet_log.Chain) -> Database:
+        """``_db`` once the log's tables are this version's (opened once in this process,
+        which migrates it): before anything is written into it."""
+        with self._lock:
+            done = chain.chain_id in self._known
+        if not done:
+            with self._opened(chain):
+                pass
+            with self._lock:
+                self._known[chain.chain_id] = chain
+        return self._db(chain)
+
+    def _project(self, chain_id: int) -> None:
+        """Bring a log's saved projections and statistics up to its records."""
+        with self._lock:
+            chain = self._known.get(chain_id)
+        if chain is None:
+            chain = next((c for c in self.chains() if c.chain_id == chain_id), None)
+            if chain is None:
+                return
+        restore.restore(self._migrated(chain))
+
+    def _lagging(self) -> list[int]:
+        """Logs whose records go past their saved projections (the central stopped before
+        projecting them)."""
+        found = []
+        for chain in self.chains():
+            try:
+                with self._db(chain).reading() as conn:
+                    if restore.saved_seq(conn) < event_log.head(conn)[0]:
+                        found.append(chain.chain_id)
+            except FaultLedgerError as error:  # entered, never written: nothing to project
+                log.info("robot log %s: %s", chain.ledger_id, error)
+        return found
+
+    def behind(self) -> dict[str, int]:
+        """Records per robot log (ledger_id) stored but not yet projected."""
+        lag = self._backlog.behind()
+        return {c.ledger_id: lag[c.chain_id] for c in self.chains() if c.chain_id in lag}
 
     def _evict(self) -> None:
         """Close the least recently used idle logs beyond ``open_logs``."""
@@ -222,20 +302,61 @@ class Fleet:
             raise BatchError("invalid-request", f"head_seq {batch.head_seq} is before the "
                              f"batch's last record {records[-1].seq}")
         check_batch(records, batch.robot_id, batch.ledger_id)
-        chain = self._chain(batch.ledger_id) or self._enter(batch, now_ns)
+        chain = self._entry(batch, now_ns)
         if chain.robot_id != batch.robot_id:
+            held = self._chain(batch.ledger_id) or chain
             raise BatchError("robot-differs", f"log {batch.ledger_id} belongs to robot "
-                             f"{chain.robot_id}, not {batch.robot_id}", last_seq=chain.last_seq)
-        with self.log(chain) as ledger:
-            done: Imported = ledger._writer.submit(Import(records))
-            last_recorded = max([r.recorded_at_ns for r in records if r.seq <= done.last_seq],
-                                default=0)
+                             f"{chain.robot_id}, not {batch.robot_id}", last_seq=held.last_seq)
+        done = self._store(chain, records)
         if done.refused is not None:
             self._contact(chain, batch, done, 0, now_ns)
             raise BatchError(done.refused, done.message, done.seq, done.last_seq)
+        self._backlog.stored(chain.chain_id, done.stored)
+        last_recorded = max([r.recorded_at_ns for r in records if r.seq <= done.last_seq],
+                            default=0)
         self._contact(chain, batch, done, last_recorded, now_ns)
         return PushAnswer(batch.robot_id, batch.ledger_id, done.last_seq, done.last_hash,
                           done.stored, done.ignored)
+
+    def _entry(self, batch: PushBatch, now_ns: int | None) -> fleet_log.Chain:
+        """The directory's entry of the batch's log (made at first contact); which robot a
+        log belongs to never changes, so it is looked up once per process."""
+        with self._lock:
+            found = self._entered.get(batch.ledger_id)
+        if found is None:
+            found = self._chain(batch.ledger_id) or self._enter(batch, now_ns)
+            with self._lock:
+                self._entered[batch.ledger_id] = found
+        return found
+
+    def _store(self, chain: fleet_log.Chain, records: Sequence[PushedRecord]) -> Stored:
+        """Under the log's write lock: check the batch against the log's head and append the
+        records it lacks, verbatim; a refusal stores nothing."""
+        with self._migrated(chain).writing() as conn:
+            head_seq, head_hash = event_log.head(conn)
+            held = [r for r in records if r.seq <= head_seq]
+            if held:
+                stored = event_log.hashes_between(conn, held[0].seq, held[-1].seq)
+                for record in held:
+                    if stored.get(record.seq) != record.hash:
+                        return Stored(head_seq, head_hash, refused="record-differs",
+                                      seq=record.seq, message=f"record {record.seq} differs "
+                                      "from the one the central holds: the robot's log was "
+                                      "rewritten")
+            new = records[len(held):]
+            if new and new[0].seq != head_seq + 1:
+                return Stored(head_seq, head_hash, refused="chain-gap", seq=new[0].seq,
+                              message=f"the central holds this log up to seq {head_seq}; the "
+                              f"batch starts at {new[0].seq}")
+            if new and new[0].prev_hash != head_hash:
+                return Stored(head_seq, head_hash, refused="record-differs", seq=head_seq,
+                              message=f"record {head_seq} differs from the one the central "
+                              "holds (the next record does not chain to it): the robot's log "
+                              "was rewritten")
+            if not new:
+                return Stored(head_seq, head_hash, 0, len(held))
+            event_log.append_verbatim(conn, new)
+        return Stored(new[-1].seq, new[-1].hash, len(new), len(held))
 
     def _enter(self, batch: PushBatch, now_ns: int | None) -> fleet_log.Chain:
         with self.central._db.writing(lock_key=directory_lock_key(batch.ledger_id)) as conn:
@@ -245,16 +366,14 @@ class Fleet:
                 found = fleet_log.new_chain(conn, batch.ledger_id, batch.robot_id, now)
         return found
 
-    def _contact(self, chain: fleet_log.Chain, batch: PushBatch, done: Imported,
+    def _contact(self, chain: fleet_log.Chain, batch: PushBatch, done: Stored,
                  last_recorded_ns: int, now_ns: int | None) -> None:
         """Note the robot's contact and how far the log now goes (after the log's own
         commit: should this fail, the next push puts it right)."""
         with self.central._db.writing(lock_key=directory_lock_key(batch.ledger_id)) as conn:
-            current = fleet_log.chain_of(conn, batch.ledger_id) or chain
             fleet_log.record_contact(
-                conn, current, last_seq=done.last_seq, last_hash=done.last_hash,
-                head_seq=max(batch.head_seq, done.last_seq),
-                last_recorded_ns=max(last_recorded_ns, current.last_recorded_ns),
+                conn, chain.chain_id, last_seq=done.last_seq, last_hash=done.last_hash,
+                head_seq=max(batch.head_seq, done.last_seq), last_recorded_ns=last_recorded_ns,
                 now_ns=time.time_ns() if now_ns is None else now_ns)
 
     # -- reads -------------------------------------------------------------------------------
@@ -360,8 +479,8 @@ class Fleet:
         query = statistics.StatsQuery(by, since, until, codes, log_keys, self.central.calendar,
                                       as_of, self.central.estop_codes, budget)
         def compute(chain: fleet_log.Chain) -> list[StatsRow]:
-            with self._reading(chain) as db:
-                return statistics.compute(db, query)
+            self._backlog.current(chain.chain_id)
+            return statistics.compute(self._db(chain), query)
 
         # Two logs at a time: while one waits for the database the other is folded.
         with ThreadPoolExecutor(STATS_THREADS, thread_name_prefix="faultledger-fleet") as pool:

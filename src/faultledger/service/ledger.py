@@ -304,6 +304,17 @@ class FaultLedger:
     def _faults(self) -> list[Fault]:
         return self._writer.projector.committed()
 
+    def catch_up(self) -> int:
+        """Apply the records other processes appended since (whoever appended them saved
+        their projections) and return the log's last seq: for readers that must see them
+        now rather than at the next background tick."""
+        with self._db.reading() as conn:
+            stored = event_log.head(conn)[0]
+        if stored == self.last_seq:
+            return stored
+        result: int = self._writer.submit(CatchUp())
+        return result
+
     def list_faults(self, statuses: Iterable[str] = (), severity: int | None = None
                     ) -> list[Fault]:
         return queries.select(self._faults(), statuses, severity)
@@ -492,10 +503,7 @@ class FaultLedger:
         """Time-based confirmation and pick-up of records other processes appended."""
         while not self._stop.wait(self._tick_interval()):
             try:
-                with self._db.reading() as conn:
-                    stored = event_log.head(conn)[0]
-                if stored != self.last_seq:
-                    self._writer.submit(CatchUp())
+                self.catch_up()
                 if self.policy.auto_confirm_after_sec > 0:
                     self._writer.submit(ConfirmOverdue(time.time_ns()))
             except FaultLedgerError as error:

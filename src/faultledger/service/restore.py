@@ -106,6 +106,12 @@ def restore(db: Database) -> tuple[Projector, int, int]:
     return projector, stored_seq, replayed
 
 
+def saved_seq(conn: Connection) -> int:
+    """How far the saved projections and statistics both go (behind the log's head: a
+    process stored records without projecting them, e.g. a fleet central, service/fleet.py)."""
+    return min(projections.load_checkpoint(conn).seq, stat_tables.checkpoint_seq(conn))
+
+
 class _Moved(Exception):
     """The projections moved between reading them and taking the write lock."""
 

@@ -9,7 +9,6 @@ commit), and nothing is acknowledged before it is durable.
 
 from __future__ import annotations
 
-import json
 import logging
 import threading
 import time
@@ -32,9 +31,7 @@ from faultledger.domain.events import (
     LogRecord,
     PolicyChanged,
     ReclassifiedOnStartup,
-    decode,
 )
-from faultledger.domain.fleet import PushedRecord
 from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
@@ -110,32 +107,8 @@ class Exclusive:
     action: Callable[[Connection, Writer], Any]
 
 
-@dataclass(frozen=True, slots=True)
-class Import:
-    """Records of a log written elsewhere, kept verbatim (a fleet central's copy of a robot
-    log, service/fleet.py): the ones this log holds already must be the same, the others
-    must continue it. Runs alone, like ``Exclusive``; it records no policy and no identity
-    of its own (the records carry the robot's)."""
-
-    records: tuple[PushedRecord, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class Imported:
-    """What an ``Import`` did: how far this log now goes, or why nothing was stored
-    (``refused``: a docs/fleet.md error code, with the seq it names)."""
-
-    last_seq: int
-    last_hash: str
-    stored: int = 0
-    ignored: int = 0
-    refused: str | None = None
-    message: str = ""
-    seq: int | None = None
-
-
 Command = (Report | Clear | RecordGoal | ConfirmOverdue | ReclassifyHealed | RecordPolicy
-           | CatchUp | Exclusive | Import)
+           | CatchUp | Exclusive)
 
 
 def _held_lock() -> threading.Lock:
@@ -177,8 +150,6 @@ class _Batch:
         self.identified = False
         """Whether this batch appends the log's identity record."""
         self.records: list[LogRecord] = []
-        self.verbatim: list[PushedRecord] = []
-        """Imported records, stored as they came (``records`` holds them decoded)."""
         self.transitions: list[Transition] = []
         self.notifications: list[Notification] = []
 
@@ -202,13 +173,6 @@ class _Batch:
         )
         self._apply(record)
         return record.seq
-
-    def take(self, pushed: PushedRecord) -> None:
-        """An imported record: applied decoded, stored verbatim."""
-        event = decode(pushed.kind, pushed.schema_version, json.loads(pushed.payload))
-        self._apply(LogRecord(pushed.seq, pushed.event_id, event, pushed.occurred_at_ns,
-                              pushed.recorded_at_ns, pushed.schema_version, pushed.hash))
-        self.verbatim.append(pushed)
 
     def _apply(self, record: LogRecord) -> None:
         effect: Effect = self.projector.apply(record)
@@ -442,10 +406,7 @@ class Writer:
                 for pending in group:
                     pending.result = self._build(pending.command, batch, known, conn)
                 head_hash = self._head[1]
-                if batch.verbatim:
-                    event_log.append_verbatim(conn, batch.verbatim)
-                    head_hash = batch.verbatim[-1].hash
-                elif batch.records:
+                if batch.records:
                     head_hash = event_log.append(conn, batch.records, head_hash)
                 if batch.records:
                     projections.save(conn, projector.staged_faults(), batch.transitions,
@@ -546,38 +507,7 @@ class Writer:
             return projector.policy
         if isinstance(command, CatchUp):
             return projector.seq
-        if isinstance(command, Import):
-            return self._import(command, batch, conn)
         return command.action(conn, self)
-
-    def _import(self, command: Import, batch: _Batch, conn: Connection) -> Imported:
-        """Check an import against this log's head (under the write lock) and take the
-        records it lacks; a refusal stores nothing."""
-        head_seq, head_hash = self.projector.seq, self._head[1] if self._head else ""
-        records = command.records
-        held = [r for r in records if r.seq <= head_seq]
-        if held:
-            stored = event_log.hashes_between(conn, held[0].seq, held[-1].seq)
-            for record in held:
-                if stored.get(record.seq) != record.hash:
-                    return Imported(head_seq, head_hash, refused="record-differs", seq=record.seq,
-                                    message=f"record {record.seq} differs from the one the "
-                                    "central holds: the robot's log was rewritten")
-        new = [r for r in records if r.seq > head_seq]
-        if new and new[0].seq != head_seq + 1:
-            return Imported(head_seq, head_hash, refused="chain-gap", seq=new[0].seq,
-                            message=f"the central holds this log up to seq {head_seq}; the "
-                            f"batch starts at {new[0].seq}")
-        if new and new[0].prev_hash != head_hash:
-            return Imported(head_seq, head_hash, refused="record-differs", seq=head_seq,
-                            message=f"record {head_seq} differs from the one the central "
-                            "holds (the next record does not chain to it): the robot's log "
-                            "was rewritten")
-        for record in new:
-            batch.take(record)
-        last = new[-1] if new else None
-        return Imported(head_seq if last is None else last.seq,
-                        head_hash if last is None else last.hash, len(new), len(held))
 
     @staticmethod
     def _goal(command: RecordGoal, batch: _Batch, known: set[str]) -> ReportResult:
@@ -623,11 +553,11 @@ def clipped(error: BaseException, limit: int = 300) -> str:
 
 
 def _split_exclusive(batch: list[_Pending]) -> list[list[_Pending]]:
-    """Exclusive commands and imports run in a transaction of their own, in queue order."""
+    """Exclusive commands run in a transaction of their own, in queue order."""
     groups: list[list[_Pending]] = []
     current: list[_Pending] = []
     for pending in batch:
-        if isinstance(pending.command, Exclusive | Import):
+        if isinstance(pending.command, Exclusive):
             if current:
                 groups.append(current)
                 current = []

@@ -240,17 +240,19 @@ def _copy_rows(conn: Connection, table: Table, columns: Sequence[str],
 
 
 def _postgresql_begin(conn: Connection) -> None:
+    """The transaction's settings and lock, sent as one query (one round trip)."""
     driver: Any = conn.connection.driver_connection
     options = conn.get_execution_options()
     schema = options.get("faultledger_schema")
-    if not options.get("faultledger_write", False):
-        driver.execute("SET TRANSACTION ISOLATION LEVEL REPEATABLE READ")
+    write = options.get("faultledger_write", False)
+    statements = [] if write else ["SET TRANSACTION ISOLATION LEVEL REPEATABLE READ"]
     if schema is not None:  # a log in a schema of this database (a central's robot log)
-        driver.execute(f'SET LOCAL search_path TO "{schema}"')
-    if options.get("faultledger_write", False):
+        statements.append(f'SET LOCAL search_path TO "{schema}"')
+    if write:
         key = int(options.get("faultledger_lock_key", WRITE_LOCK))
-        driver.execute(f"SET LOCAL lock_timeout = {BUSY_TIMEOUT_MS}")
-        driver.execute(f"SELECT pg_advisory_xact_lock({key})")
+        statements.append(f"SET LOCAL lock_timeout = {BUSY_TIMEOUT_MS}")
+        statements.append(f"SELECT pg_advisory_xact_lock({key})")
+    driver.execute("; ".join(statements))
 
 
 _RULES: dict[str, DialectRules] = {"sqlite": SQLiteRules(), "postgresql": PostgreSQLRules()}

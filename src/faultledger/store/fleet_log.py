@@ -19,7 +19,9 @@ from typing import Any
 
 from sqlalchemy import (
     Connection,
+    case,
     insert,
+    literal,
     select,
     text,
     update,
@@ -100,12 +102,18 @@ def chain_url(central_url: str, chain_id: int) -> str:
                                     / f"chain-{chain_id}.db")))
 
 
-def record_contact(conn: Connection, chain: Chain, *, last_seq: int, last_hash: str,
+def record_contact(conn: Connection, chain_id: int, *, last_seq: int, last_hash: str,
                    head_seq: int, last_recorded_ns: int, now_ns: int) -> None:
-    """Move the chain's head and note the contact; the log is complete up to now when the
-    robot has nothing the central lacks, else up to the newest record it holds."""
-    complete = now_ns if last_seq >= head_seq else last_recorded_ns
-    conn.execute(update(fleet_chains).where(fleet_chains.c.chain_id == chain.chain_id).values(
-        last_seq=last_seq, last_hash=last_hash, head_seq=head_seq, last_contact_ns=now_ns,
-        last_recorded_ns=last_recorded_ns,
-        complete_until_ns=max(complete, chain.complete_until_ns)))
+    """Move the chain's head and note the contact, in one statement (no lock needed): the log
+    is complete up to now when the robot has nothing the central lacks, else up to the newest
+    record it holds; neither mark ever moves back."""
+    c = fleet_chains.c
+    head = case((c.head_seq > head_seq, c.head_seq), else_=head_seq)
+    recorded = case((c.last_recorded_ns > last_recorded_ns, c.last_recorded_ns),
+                    else_=last_recorded_ns)
+    complete = case((literal(last_seq) >= head, now_ns), else_=recorded)
+    conn.execute(update(fleet_chains).where(c.chain_id == chain_id).values(
+        last_seq=last_seq, last_hash=last_hash, head_seq=head, last_contact_ns=now_ns,
+        last_recorded_ns=recorded,
+        complete_until_ns=case((c.complete_until_ns > complete, c.complete_until_ns),
+                               else_=complete)))

@@ -1,0 +1,43 @@
+"""The chain hash's bytes (SPEC §3) are fixed for ever: every log ever written depends on them.
+``record_hash`` writes the canonical list out by hand for speed; here it is held to the
+definition, ``canonical_json`` of the list, for any text and any numbers."""
+
+from __future__ import annotations
+
+import hashlib
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
+
+TEXT = st.text(st.characters(exclude_categories=["Cs"]), max_size=40)  # any UTF-8 text
+NUMBER = st.integers(min_value=0, max_value=2**63 - 1)
+
+
+def by_definition(prev: str, seq: int, event_id: str, kind: str, code: str | None,
+                  source: str | None, payload: str, occurred: int, recorded: int,
+                  version: int) -> str:
+    digest = hashlib.sha256(prev.encode("ascii"))
+    digest.update(canonical_json([seq, event_id, kind, code, source, occurred, recorded,
+                                  version]).encode("utf-8"))
+    digest.update(payload.encode("utf-8"))
+    return digest.hexdigest()
+
+
+@given(seq=NUMBER, event_id=TEXT, kind=TEXT, code=st.none() | TEXT, source=st.none() | TEXT,
+       payload=TEXT, occurred=NUMBER, recorded=NUMBER, version=NUMBER)
+def test_record_hash_is_the_canonical_json_definition(
+        seq: int, event_id: str, kind: str, code: str | None, source: str | None,
+        payload: str, occurred: int, recorded: int, version: int) -> None:
+    args = (GENESIS_HASH, seq, event_id, kind, code, source, payload, occurred, recorded,
+            version)
+    assert record_hash(*args) == by_definition(*args)
+
+
+def test_a_known_record_keeps_its_hash() -> None:
+    """One record's hash as computed before the hand-written form (through the encoder): a
+    change of bytes shows here even if the definition above were changed with it."""
+    assert record_hash(GENESIS_HASH, 1, "e-1", "fault_reported", 'MOTOR_"HOT"\n\t', None,
+                       '{"a":"ü"}', 10, 20, 1) == (
+        "365ecde7bbe2c65e47b6295162dc03207b4478fc71653466078bc386d736c9ad")
