@@ -50,6 +50,8 @@ from tests import pg_server
 
 from faultledger import FaultLedger, Policy
 from faultledger.domain.clock import to_ns
+from faultledger.fleet.pace import BatchPace
+from faultledger.fleet.push import record_json
 from faultledger.service.audit import export_history
 
 BATCH = 1_000
@@ -74,37 +76,30 @@ def make_robot_log(path: Path, robot_id: str, records: int) -> None:
             done += len(burst)
 
 
-def batches_of(path: Path) -> tuple[str, str, list[dict[str, Any]]]:
-    """The robot's log as the push bodies ``faultledger sync`` sends."""
+def prepare(path: Path) -> Path:
+    """A robot log as ``faultledger sync`` encodes it (a first line with the identity and
+    head, then one record's JSON a line), made before anything is timed."""
     with FaultLedger.open(f"sqlite:///{path}") as robot:
         identity = robot.identity
         assert identity is not None
         rows = list(export_history(robot))
-    head = rows[-1].seq
-    bodies = []
-    for start in range(0, len(rows), BATCH):
-        part = rows[start:start + BATCH]
-        bodies.append({"robot_id": identity.robot_id, "ledger_id": identity.ledger_id,
-                       "head_seq": head, "records": [{
-                           "seq": r.seq, "event_id": r.event_id, "kind": r.kind,
-                           "fault_code": r.fault_code, "source_id": r.source_id,
-                           "payload": r.payload_json, "occurred_at_ns": r.occurred_at_ns,
-                           "recorded_at_ns": r.recorded_at_ns,
-                           "schema_version": r.schema_version, "hash": r.hash,
-                           "prev_hash": r.prev_hash} for r in part]})
-    return identity.robot_id, identity.ledger_id, bodies
-
-
-def prepare(path: Path) -> Path:
-    """The push bodies of a robot log, one JSON line each, made before anything is timed."""
-    out = path.with_suffix(".bodies")
-    bodies = batches_of(path)[2]
+    out = path.with_suffix(".records")
     with out.open("w") as lines:
-        for body in bodies:
-            lines.write(json.dumps(body) + "\n")
-    first = {**bodies[0], "records": bodies[0]["records"][:1]}
-    path.with_suffix(".first").write_text(json.dumps(first))
+        lines.write(json.dumps({"robot_id": identity.robot_id, "ledger_id": identity.ledger_id,
+                                "head_seq": rows[-1].seq}) + "\n")
+        for row in rows:
+            lines.write(record_json(row) + "\n")
     return out
+
+
+def records_in(path: str) -> tuple[bytes, list[bytes]]:
+    """(the body's start up to ``"records":[``, the records' JSON) of a prepared log."""
+    head, *records = Path(path).read_bytes().splitlines()
+    return head[:-1] + b',"records":[', records
+
+
+def body(start: bytes, records: list[bytes]) -> bytes:
+    return start + b",".join(records) + b"]}"
 
 
 def first_contact(url: str, prepared: list[str]) -> float:
@@ -113,14 +108,10 @@ def first_contact(url: str, prepared: list[str]) -> float:
     started = time.perf_counter()
     with httpx.Client(base_url=url, timeout=60.0) as client:
         for path in prepared:
-            client.post("/api/v1/fleet/records",
-                        content=Path(path).with_suffix(".first").read_bytes(),
+            start, records = records_in(path)
+            client.post("/api/v1/fleet/records", content=body(start, records[:1]),
                         headers={"content-type": "application/json"}).raise_for_status()
     return (time.perf_counter() - started) / len(prepared)
-
-
-def bodies_in(path: str) -> list[bytes]:
-    return Path(path).read_bytes().splitlines()
 
 
 Timings = list[tuple[float, float, int]]
@@ -128,68 +119,78 @@ Timings = list[tuple[float, float, int]]
 
 
 def push_worker(url: str, path: str) -> Callable[[], Timings]:
-    bodies = bodies_in(path)
+    """Push a robot's log as ``faultledger sync`` does: batches sized by ``BatchPace``."""
+    start, records = records_in(path)
     client = httpx.Client(base_url=url, timeout=60.0)
     client.get("/health").raise_for_status()
 
     def go() -> Timings:
         times = []
+        pace, at = BatchPace(BATCH), 1  # the central holds the first record (first contact)
         try:
-            for raw in bodies:
+            while at < len(records):
+                part = records[at:at + pace.size]
                 began = time.time()
-                answer = client.post("/api/v1/fleet/records", content=raw,
+                answer = client.post("/api/v1/fleet/records", content=body(start, part),
                                      headers={"content-type": "application/json"})
                 if answer.status_code != 200:
                     raise RuntimeError(f"push refused: {answer.status_code} "
                                        f"{answer.text[:300]}")
-                times.append((began, time.time(), answer.json()["stored"]))
+                done = time.time()
+                pace.answered(len(part), done - began)
+                times.append((began, done, answer.json()["stored"]))
+                at += len(part)
         finally:
             client.close()
         return times
     return go
 
 
+def batches(path: str) -> list[list[dict[str, Any]]]:
+    """The prepared log's records in batches of 1,000 (the raw baselines)."""
+    records = [json.loads(raw) for raw in records_in(path)[1]]
+    return [records[at:at + BATCH] for at in range(0, len(records), BATCH)]
+
+
 def copy_worker(dsn: str, path: str, chain: int) -> Callable[[], Timings]:
     """The same rows with one COPY per batch into a plain table (the raw baseline)."""
-    bodies = [json.loads(raw) for raw in bodies_in(path)]
+    parts = batches(path)
     conn = psycopg.connect(dsn)
 
     def go() -> Timings:
         times = []
         with conn:
-            for body in bodies:
+            for part in parts:
                 began = time.time()
                 with conn.cursor() as cursor, cursor.copy(
                         "COPY raw_records (chain_id, " + ", ".join(COLUMNS)
                         + ") FROM STDIN") as copy:
-                    for r in body["records"]:
+                    for r in part:
                         copy.write_row((chain, *(r[c] for c in COLUMNS)))
                 conn.commit()
-                times.append((began, time.time(), len(body["records"])))
+                times.append((began, time.time(), len(part)))
         return times
     return go
 
 
 def insert_worker(dsn: str, path: str) -> Timings:
     """Raw psycopg inserts (executemany, one transaction per batch) of one robot's rows."""
-    bodies = [json.loads(raw) for raw in bodies_in(path)]
     times = []
     sql = ("INSERT INTO raw_records (chain_id, " + ", ".join(COLUMNS) + ") VALUES ("
            + ", ".join(["%s"] * (len(COLUMNS) + 1)) + ")")
     with psycopg.connect(dsn) as conn:
-        for body in bodies:
+        for part in batches(path):
             began = time.time()
             with conn.cursor() as cursor:
-                cursor.executemany(sql, [(999, *(r[c] for c in COLUMNS))
-                                         for r in body["records"]])
+                cursor.executemany(sql, [(999, *(r[c] for c in COLUMNS)) for r in part])
             conn.commit()
-            times.append((began, time.time(), len(body["records"])))
+            times.append((began, time.time(), len(part)))
     return times
 
 
 def _together(work: Any, barrier: Any, results: Any, index: int, *args: Any) -> None:
     try:
-        go = work(*args)  # set up (load the bodies, connect)
+        go = work(*args)  # set up (load the records, connect)
     except BaseException:
         barrier.abort()
         raise

@@ -115,3 +115,7 @@ def test_metrics_give_each_robot_logs_lag(http_server: Callable[..., Server],
     assert f"faultledger_fleet_records{labels} 10.0" in text
     assert f"faultledger_fleet_lag_records{labels} {float(records[-1].seq - 10)}" in text
     assert f"faultledger_fleet_lag_seconds{labels}" in text
+    assert f"faultledger_fleet_unprojected_records{labels}" in text
+    assert server.client.get("/api/v1/faults", params={"robot": "robot-a"}).status_code == 200
+    projected = server.client.get("/metrics").text  # the read brought the projections up
+    assert f"faultledger_fleet_unprojected_records{labels} 0.0" in projected

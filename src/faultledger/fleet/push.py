@@ -1,5 +1,6 @@
 """Store and forward, the robot's half (docs/fleet.md, "Robot side"): push every record of the
-robot's log, verbatim and in seq order, to the central, in batches of at most 1,000 records.
+robot's log, verbatim and in seq order, to the central, in batches of at most 1,000 records,
+sized to the central's pace (fleet/pace.py).
 
 ``Pusher.sync`` catches up once (`faultledger sync`); ``Pusher.follow`` keeps the central
 caught up until stopped (`sync --follow`, and ``PusherThread`` in `serve` / `http` with the
@@ -35,6 +36,7 @@ from faultledger.fleet.client import (
     TokenRefused,
     read_token,
 )
+from faultledger.fleet.pace import BatchPace
 from faultledger.service.audit import export_history
 from faultledger.service.config import FleetSettings
 from faultledger.service.ledger import FaultLedger
@@ -301,6 +303,7 @@ class Pusher:
         self.client = client
         self.reporter = reporter
         self.max_records = max(1, min(max_records, MAX_RECORDS))
+        self.pace = BatchPace(self.max_records)
         self.max_bytes = max_bytes
         self.clock = clock
         self.stop = threading.Event()
@@ -342,11 +345,13 @@ class Pusher:
         if self._burst is None:
             self._burst = (self.clock(), self.pushed)
         head = self.log.head()
-        batch = self.log.batch(self.central_seq, self.max_records, self.max_bytes)
+        batch = self.log.batch(self.central_seq, self.pace.size, self.max_bytes)
         if batch is None:
             return 0
         try:
+            sent = self.clock()
             batch, answer = self._send(identity, head, batch)
+            self.pace.answered(len(batch.records), self.clock() - sent)
         except BatchRefused as refusal:
             # The records before the refused one are good: the central takes them, so it
             # holds everything up to the seq named (a refusal stores nothing of its batch).

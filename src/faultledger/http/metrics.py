@@ -79,12 +79,17 @@ def _fleet(robot_logs: Fleet) -> Iterator[Metric]:
                                 "central lacked at the robot's last contact", labels=labels)
     held = GaugeMetricFamily("faultledger_fleet_records", "Records of a robot's log the "
                              "central holds", labels=labels)
+    unprojected = GaugeMetricFamily("faultledger_fleet_unprojected_records", "Records of a "
+                                    "robot's log the central stored but has not yet projected "
+                                    "(docs/fleet.md)", labels=labels)
+    behind = robot_logs.behind()
     for chain in robot_logs.robots():
         key = [chain.robot_id, chain.ledger_id]
         seconds.add_metric(key, chain.lag_seconds)
         records.add_metric(key, chain.lag_records)
         held.add_metric(key, chain.records)
-    yield from (seconds, records, held)
+        unprojected.add_metric(key, behind.get(chain.ledger_id, 0))
+    yield from (seconds, records, held, unprojected)
 
 
 def registry(context: Context) -> CollectorRegistry:

@@ -29,6 +29,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from datetime import datetime
 
+from sqlalchemy import Connection
+
 from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.fault import Fault
 from faultledger.domain.fleet import (
@@ -152,6 +154,7 @@ class Fleet:
         self._databases: dict[int, Database] = {}
         self._known: dict[int, fleet_log.Chain] = {}
         self._entered: dict[str, fleet_log.Chain] = {}
+        self._schema: str | None = None
         self._backlog = fleet_backlog.Backlog(self._project, self._lagging, quiet, max_lag)
 
     def close(self) -> None:
@@ -307,14 +310,10 @@ class Fleet:
             held = self._chain(batch.ledger_id) or chain
             raise BatchError("robot-differs", f"log {batch.ledger_id} belongs to robot "
                              f"{chain.robot_id}, not {batch.robot_id}", last_seq=held.last_seq)
-        done = self._store(chain, records)
+        done = self._store(chain, batch, records, now_ns)
         if done.refused is not None:
-            self._contact(chain, batch, done, 0, now_ns)
             raise BatchError(done.refused, done.message, done.seq, done.last_seq)
         self._backlog.stored(chain.chain_id, done.stored)
-        last_recorded = max([r.recorded_at_ns for r in records if r.seq <= done.last_seq],
-                            default=0)
-        self._contact(chain, batch, done, last_recorded, now_ns)
         return PushAnswer(batch.robot_id, batch.ledger_id, done.last_seq, done.last_hash,
                           done.stored, done.ignored)
 
@@ -329,33 +328,59 @@ class Fleet:
                 self._entered[batch.ledger_id] = found
         return found
 
-    def _store(self, chain: fleet_log.Chain, records: Sequence[PushedRecord]) -> Stored:
+    def _store(self, chain: fleet_log.Chain, batch: PushBatch,
+               records: Sequence[PushedRecord], now_ns: int | None) -> Stored:
+        """Append what the log lacks and note the robot's contact: on PostgreSQL in one
+        transaction (the directory is named by the central's schema), on SQLite (the log is
+        a file of its own) right after the log's commit; should that fail, the next push
+        puts the directory right."""
+        schema = self._central_schema()
+        with self._migrated(chain).writing() as conn:
+            done = self._append(conn, records)
+            if schema is not None:
+                self._contact(conn, chain, batch, records, done, now_ns, schema)
+        if schema is None:
+            with self.central._db.writing(
+                    lock_key=directory_lock_key(batch.ledger_id)) as conn:
+                self._contact(conn, chain, batch, records, done, now_ns, None)
+        return done
+
+    def _central_schema(self) -> str | None:
+        """The PostgreSQL schema of the central's own tables (None on SQLite)."""
+        if self.central._db.dialect != "postgresql":
+            return None
+        if self._schema is None:
+            with self.central._db.reading() as conn:
+                self._schema = fleet_log.current_schema(conn)
+        return self._schema
+
+    @staticmethod
+    def _append(conn: Connection, records: Sequence[PushedRecord]) -> Stored:
         """Under the log's write lock: check the batch against the log's head and append the
         records it lacks, verbatim; a refusal stores nothing."""
-        with self._migrated(chain).writing() as conn:
-            head_seq, head_hash = event_log.head(conn)
-            held = [r for r in records if r.seq <= head_seq]
-            if held:
-                stored = event_log.hashes_between(conn, held[0].seq, held[-1].seq)
-                for record in held:
-                    if stored.get(record.seq) != record.hash:
-                        return Stored(head_seq, head_hash, refused="record-differs",
-                                      seq=record.seq, message=f"record {record.seq} differs "
-                                      "from the one the central holds: the robot's log was "
-                                      "rewritten")
-            new = records[len(held):]
-            if new and new[0].seq != head_seq + 1:
-                return Stored(head_seq, head_hash, refused="chain-gap", seq=new[0].seq,
-                              message=f"the central holds this log up to seq {head_seq}; the "
-                              f"batch starts at {new[0].seq}")
-            if new and new[0].prev_hash != head_hash:
-                return Stored(head_seq, head_hash, refused="record-differs", seq=head_seq,
-                              message=f"record {head_seq} differs from the one the central "
-                              "holds (the next record does not chain to it): the robot's log "
-                              "was rewritten")
-            if not new:
-                return Stored(head_seq, head_hash, 0, len(held))
-            event_log.append_verbatim(conn, new)
+        head_seq, head_hash = event_log.head(conn)
+        held = [r for r in records if r.seq <= head_seq]
+        if held:
+            stored = event_log.hashes_between(conn, held[0].seq, held[-1].seq)
+            for record in held:
+                if stored.get(record.seq) != record.hash:
+                    return Stored(head_seq, head_hash, refused="record-differs",
+                                  seq=record.seq, message=f"record {record.seq} differs "
+                                  "from the one the central holds: the robot's log was "
+                                  "rewritten")
+        new = records[len(held):]
+        if new and new[0].seq != head_seq + 1:
+            return Stored(head_seq, head_hash, refused="chain-gap", seq=new[0].seq,
+                          message=f"the central holds this log up to seq {head_seq}; the "
+                          f"batch starts at {new[0].seq}")
+        if new and new[0].prev_hash != head_hash:
+            return Stored(head_seq, head_hash, refused="record-differs", seq=head_seq,
+                          message=f"record {head_seq} differs from the one the central "
+                          "holds (the next record does not chain to it): the robot's log "
+                          "was rewritten")
+        if not new:
+            return Stored(head_seq, head_hash, 0, len(held))
+        event_log.append_verbatim(conn, new)
         return Stored(new[-1].seq, new[-1].hash, len(new), len(held))
 
     def _enter(self, batch: PushBatch, now_ns: int | None) -> fleet_log.Chain:
@@ -366,15 +391,17 @@ class Fleet:
                 found = fleet_log.new_chain(conn, batch.ledger_id, batch.robot_id, now)
         return found
 
-    def _contact(self, chain: fleet_log.Chain, batch: PushBatch, done: Stored,
-                 last_recorded_ns: int, now_ns: int | None) -> None:
-        """Note the robot's contact and how far the log now goes (after the log's own
-        commit: should this fail, the next push puts it right)."""
-        with self.central._db.writing(lock_key=directory_lock_key(batch.ledger_id)) as conn:
-            fleet_log.record_contact(
-                conn, chain.chain_id, last_seq=done.last_seq, last_hash=done.last_hash,
-                head_seq=max(batch.head_seq, done.last_seq), last_recorded_ns=last_recorded_ns,
-                now_ns=time.time_ns() if now_ns is None else now_ns)
+    @staticmethod
+    def _contact(conn: Connection, chain: fleet_log.Chain, batch: PushBatch,
+                 records: Sequence[PushedRecord], done: Stored, now_ns: int | None,
+                 schema: str | None) -> None:
+        """Note the robot's contact and how far the log now goes (a refusal too)."""
+        last_recorded = 0 if done.refused is not None else max(
+            [r.recorded_at_ns for r in records if r.seq <= done.last_seq], default=0)
+        fleet_log.record_contact(
+            conn, chain.chain_id, last_seq=done.last_seq, last_hash=done.last_hash,
+            head_seq=max(batch.head_seq, done.last_seq), last_recorded_ns=last_recorded,
+            now_ns=time.time_ns() if now_ns is None else now_ns, schema=schema)
 
     # -- reads -------------------------------------------------------------------------------
     def robots(self, now_ns: int | None = None, robot_id: str | None = None

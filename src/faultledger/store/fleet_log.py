@@ -14,14 +14,17 @@ and when the robot last made contact (docs/fleet.md, "Lag").
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 from sqlalchemy import (
+    BigInteger,
     Connection,
+    MetaData,
+    bindparam,
     case,
     insert,
-    literal,
     select,
     text,
     update,
@@ -79,6 +82,11 @@ def new_chain(conn: Connection, ledger_id: str, robot_id: str, now_ns: int) -> C
     return found
 
 
+def current_schema(conn: Connection) -> str:
+    """Where a PostgreSQL connection's unqualified tables are (the central's own)."""
+    return str(conn.execute(text("SELECT current_schema()")).scalar_one())
+
+
 def schema(chain_id: int) -> str:
     """The PostgreSQL schema of a robot log."""
     return f"{SCHEMA_PREFIX}{chain_id}"
@@ -103,17 +111,32 @@ def chain_url(central_url: str, chain_id: int) -> str:
 
 
 def record_contact(conn: Connection, chain_id: int, *, last_seq: int, last_hash: str,
-                   head_seq: int, last_recorded_ns: int, now_ns: int) -> None:
+                   head_seq: int, last_recorded_ns: int, now_ns: int,
+                   schema: str | None = None) -> None:
     """Move the chain's head and note the contact, in one statement (no lock needed): the log
     is complete up to now when the robot has nothing the central lacks, else up to the newest
-    record it holds; neither mark ever moves back."""
-    c = fleet_chains.c
+    record it holds; neither mark ever moves back. ``schema``: the central's, named when the
+    connection's search_path is a robot log's (PostgreSQL: the contact is noted in the
+    transaction that stores the records)."""
+    conn.execute(_contact_statement(schema), {
+        "id": chain_id, "seq": last_seq, "hash": last_hash, "head": head_seq,
+        "recorded": last_recorded_ns, "now": now_ns})
+
+
+@lru_cache(maxsize=4)
+def _contact_statement(schema: str | None) -> Any:
+    """Built once: constructing the statement costs more than running it."""
+    table = (fleet_chains if schema is None
+             else fleet_chains.to_metadata(MetaData(), schema=schema))
+    c = table.c
+    seq, head_seq, now = (bindparam(name, type_=BigInteger) for name in ("seq", "head", "now"))
+    last_recorded = bindparam("recorded", type_=BigInteger)
     head = case((c.head_seq > head_seq, c.head_seq), else_=head_seq)
-    recorded = case((c.last_recorded_ns > last_recorded_ns, c.last_recorded_ns),
-                    else_=last_recorded_ns)
-    complete = case((literal(last_seq) >= head, now_ns), else_=recorded)
-    conn.execute(update(fleet_chains).where(c.chain_id == chain_id).values(
-        last_seq=last_seq, last_hash=last_hash, head_seq=head, last_contact_ns=now_ns,
+    recorded = case((c.last_recorded_ns > last_recorded, c.last_recorded_ns),
+                    else_=last_recorded)
+    complete = case((seq >= head, now), else_=recorded)
+    return update(table).where(c.chain_id == bindparam("id")).values(
+        last_seq=seq, last_hash=bindparam("hash"), head_seq=head, last_contact_ns=now,
         last_recorded_ns=recorded,
         complete_until_ns=case((c.complete_until_ns > complete, c.complete_until_ns),
-                               else_=complete)))
+                               else_=complete))
