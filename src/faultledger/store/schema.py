@@ -92,6 +92,14 @@ ledger_identity = Table(
 so an open knows the identity without scanning the log."""
 
 # -- statistics projections (docs/statistics.md, "How they are served") ------------------------
+STAT_FLAGS = ("failed", "passed", "activation", "occurrence", "confirmation", "heal", "clear")
+"""What a statistics fact counts, and what the sums tables add up (docs/statistics.md)."""
+
+
+def _flag_columns() -> list[Column[int]]:
+    return [Column(name, Integer, nullable=False) for name in STAT_FLAGS]
+
+
 stat_facts = Table(
     "stat_facts",
     metadata,
@@ -100,13 +108,7 @@ stat_facts = Table(
     Column("fault_code", String(128), nullable=False),
     Column("source_id", Text, nullable=False),
     Column("severity", Integer, nullable=False),
-    Column("failed", Integer, nullable=False),
-    Column("passed", Integer, nullable=False),
-    Column("activation", Integer, nullable=False),
-    Column("occurrence", Integer, nullable=False),
-    Column("confirmation", Integer, nullable=False),
-    Column("heal", Integer, nullable=False),
-    Column("clear", Integer, nullable=False),
+    *_flag_columns(),
     Column("chatter", Integer, nullable=False),
 )
 Index("ix_stat_facts_at", stat_facts.c.at_ns)
@@ -115,6 +117,9 @@ Index("ix_stat_facts_code_at", stat_facts.c.fault_code, stat_facts.c.at_ns)
 Index("ix_stat_facts_confirmation_at", stat_facts.c.at_ns, stat_facts.c.fault_code,
       sqlite_where=stat_facts.c.confirmation == 1,
       postgresql_where=stat_facts.c.confirmation == 1)
+# The activations, for the e-stops (Alembic 0006).
+Index("ix_stat_facts_activation", stat_facts.c.fault_code, stat_facts.c.at_ns,
+      sqlite_where=stat_facts.c.activation == 1, postgresql_where=stat_facts.c.activation == 1)
 Index("ix_stat_facts_chatter_at", stat_facts.c.at_ns, stat_facts.c.fault_code,
       sqlite_where=stat_facts.c.chatter == 1, postgresql_where=stat_facts.c.chatter == 1)
 
@@ -137,32 +142,39 @@ _LONG = stat_episodes.c.end_ns - stat_episodes.c.start_ns >= STALE_AFTER_NS
 Index("ix_stat_episodes_long_end", stat_episodes.c.end_ns, sqlite_where=_LONG,
       postgresql_where=_LONG)
 
-stat_minutes = Table(
-    "stat_minutes",
-    metadata,
-    Column("minute", BigInteger, primary_key=True, autoincrement=False),
-    Column("failed", Integer, nullable=False),
-    Column("passed", Integer, nullable=False),
-    Column("activation", Integer, nullable=False),
-    Column("occurrence", Integer, nullable=False),
-    Column("confirmation", Integer, nullable=False),
-    Column("heal", Integer, nullable=False),
-    Column("clear", Integer, nullable=False),
-    Column("starts", Integer, nullable=False),
-    Column("start_offset_ns", BigInteger, nullable=False),
-    Column("ends", Integer, nullable=False),
-    Column("end_offset_ns", BigInteger, nullable=False),
-    Column("repairs", Integer, nullable=False),
-    Column("repair_ns", BigInteger, nullable=False),
-    Column("aborted_goals", Integer, nullable=False, server_default="0"),
-    Column("canceled_goals", Integer, nullable=False, server_default="0"),
-    Column("succeeded_goals", Integer, nullable=False, server_default="0"),
-)
+def _sums_table(name: str, key: str) -> Table:
+    """Sums of the statistics facts per ``key`` (a minute or an hour of ``at_ns``)."""
+    return Table(
+        name,
+        metadata,
+        Column(key, BigInteger, primary_key=True, autoincrement=False),
+        *_flag_columns(),
+        Column("starts", Integer, nullable=False),
+        Column("start_offset_ns", BigInteger, nullable=False),
+        Column("ends", Integer, nullable=False),
+        Column("end_offset_ns", BigInteger, nullable=False),
+        Column("repairs", Integer, nullable=False),
+        Column("repair_ns", BigInteger, nullable=False),
+        Column("aborted_goals", Integer, nullable=False, server_default="0"),
+        Column("canceled_goals", Integer, nullable=False, server_default="0"),
+        Column("succeeded_goals", Integer, nullable=False, server_default="0"),
+    )
+
+
+stat_minutes = _sums_table("stat_minutes", "minute")
 """Sums per minute of ``at_ns`` (minute = at_ns // 60e9). Episode starts and ends keep their
 offsets within the minute, so active time over whole minutes is exact. Repairs count in
 the minute of the record that ended the episode; ``ends`` in the minute where its time in
 CONFIRMED stops (later, when the reporter's clock ran backwards). The goal columns (Alembic
 0003) count goal outcome records by status."""
+# The minutes with confirmations, for the flood windows (Alembic 0006).
+Index("ix_stat_minutes_confirmation", stat_minutes.c.minute, stat_minutes.c.confirmation,
+      sqlite_where=stat_minutes.c.confirmation > 0,
+      postgresql_where=stat_minutes.c.confirmation > 0)
+
+stat_hours = _sums_table("stat_hours", "hour")
+"""The same sums per hour (hour = at_ns // 3600e9, offsets within the hour; Alembic 0006): a
+period of whole hours (a shift, a day) is read from 60 times fewer rows."""
 
 stat_goals = Table(
     "stat_goals",

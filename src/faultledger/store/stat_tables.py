@@ -25,11 +25,13 @@ from faultledger.domain.statistics import CodeTrack, Episode, GoalFact, StatFact
 from faultledger.store import fastpath
 from faultledger.store.dialects import upsert, upsert_add
 from faultledger.store.schema import (
+    STAT_FLAGS,
     checkpoints,
     stat_codes,
     stat_episodes,
     stat_facts,
     stat_goals,
+    stat_hours,
     stat_minutes,
 )
 
@@ -37,7 +39,8 @@ CHECKPOINT = "statistics"
 """Row in ``checkpoints``: the seq the statistics tables include (0 after the upgrade that
 created them, so the first open fills them from the whole log)."""
 NS_PER_MINUTE = 60 * 1_000_000_000
-_FLAGS = ("failed", "passed", "activation", "occurrence", "confirmation", "heal", "clear")
+NS_PER_HOUR = 60 * NS_PER_MINUTE
+_FLAGS = STAT_FLAGS
 _INSERT_FACT = stat_facts.insert()
 _INSERT_GOAL = stat_goals.insert()
 _CODE_CHUNK = 500
@@ -71,18 +74,19 @@ def _episode(row: Any) -> Episode:
                    row.end_seq, row.end_ns)
 
 
-def _minute_rows(output: StatsOutput) -> list[dict[str, Any]]:
-    """Per-minute increments of one output."""
+def _sum_rows(output: StatsOutput, unit_ns: int, key: str) -> list[dict[str, Any]]:
+    """Per-minute (per-hour) increments of one output: ``key`` is ``at_ns // unit_ns``,
+    offsets are within that minute (hour)."""
     sums: dict[int, dict[str, int]] = {}
 
     def bucket(at_ns: int) -> tuple[int, dict[str, int]]:
-        minute = at_ns // NS_PER_MINUTE
-        row = sums.get(minute)
+        unit = at_ns // unit_ns
+        row = sums.get(unit)
         if row is None:
-            row = sums[minute] = dict.fromkeys(
+            row = sums[unit] = dict.fromkeys(
                 (*_FLAGS, "starts", "start_offset_ns", "ends", "end_offset_ns", "repairs",
                  "repair_ns", *GOAL_METRICS), 0)
-        return minute, row
+        return unit, row
 
     for goal in output.goals:
         _, row = bucket(goal.at_ns)
@@ -92,19 +96,27 @@ def _minute_rows(output: StatsOutput) -> list[dict[str, Any]]:
         for flag in _FLAGS:
             row[flag] += getattr(fact, flag)
     for episode in output.started:
-        minute, row = bucket(episode.start_ns)
+        unit, row = bucket(episode.start_ns)
         row["starts"] += 1
-        row["start_offset_ns"] += episode.start_ns - minute * NS_PER_MINUTE
+        row["start_offset_ns"] += episode.start_ns - unit * unit_ns
     for episode in output.ended:
         assert episode.end_ns is not None
         stop = episode.stop_ns(episode.end_ns)
-        minute, row = bucket(stop)
+        unit, row = bucket(stop)
         row["ends"] += 1
-        row["end_offset_ns"] += stop - minute * NS_PER_MINUTE
+        row["end_offset_ns"] += stop - unit * unit_ns
         _, row = bucket(episode.end_ns)  # the repair counts where its record is
         row["repairs"] += 1
         row["repair_ns"] += episode.repair_ns
-    return [{"minute": minute, **row} for minute, row in sums.items()]
+    return [{key: unit, **row} for unit, row in sums.items()]
+
+
+def _minute_rows(output: StatsOutput) -> list[dict[str, Any]]:
+    return _sum_rows(output, NS_PER_MINUTE, "minute")
+
+
+def _hour_rows(output: StatsOutput) -> list[dict[str, Any]]:
+    return _sum_rows(output, NS_PER_HOUR, "hour")
 
 
 def _track_row(code: str, track: CodeTrack) -> dict[str, Any]:
@@ -126,6 +138,7 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
     fastpath.execute_many(conn, upsert(stat_episodes, dialect),
                           [_episode_row(e) for e in episodes.values()])
     fastpath.execute_many(conn, upsert_add(stat_minutes, dialect), _minute_rows(output))
+    fastpath.execute_many(conn, upsert_add(stat_hours, dialect), _hour_rows(output))
     fastpath.execute_many(conn, upsert(stat_codes, dialect),
                           [_track_row(code, t) for code, t in output.tracks.items()])
     fastpath.execute_many(conn, upsert(checkpoints, dialect),
@@ -134,7 +147,7 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
 
 def replace_all(conn: Connection, output: StatsOutput, seq: int) -> None:
     """Drop the statistics and write a full replay's output (``rebuild``, upgrade)."""
-    for table in (stat_facts, stat_episodes, stat_minutes, stat_codes, stat_goals):
+    for table in (stat_facts, stat_episodes, stat_minutes, stat_hours, stat_codes, stat_goals):
         conn.execute(delete(table))
     save(conn, output, seq)
 
@@ -158,14 +171,20 @@ def load_tracks(conn: Connection) -> dict[str, CodeTrack]:
 
 # -- reads -------------------------------------------------------------------------------------
 def _periods(edges: Sequence[tuple[int, int]], unit: str) -> Any:
-    """The periods as a table p(i, a, b) to join against (bounds in ``unit``).
+    """The periods as a table p(i, a, b) to join against (bounds in ``unit``)."""
+    return _ranges([(i, a, b) for i, (a, b) in enumerate(edges)], unit)
+
+
+def _ranges(rows: Sequence[tuple[int, int, int]], unit: str) -> Any:
+    """Ranges (i, a, b) as a table p(i, a, b) to join against (bounds in ``unit``; an i may
+    have several ranges).
 
     The rows are written into the SQL as integer literals (``int()`` makes that safe): bound
     parameters would hit SQLite's variable limit at ~10,000 periods, and SQLAlchemy needs
     ~0.5 ms per row to compile a VALUES construct.
     """
-    rows = ",".join(f"({i},{int(a)},{int(b)})" for i, (a, b) in enumerate(edges))
-    return text(f"SELECT column1 AS i, column2 AS a, column3 AS b FROM (VALUES {rows}) AS v"
+    values = ",".join(f"({int(i)},{int(a)},{int(b)})" for i, a, b in rows)
+    return text(f"SELECT column1 AS i, column2 AS a, column3 AS b FROM (VALUES {values}) AS v"
                 ).columns(column("i", Integer), column("a", BigInteger),
                           column("b", BigInteger)).cte(f"p_{unit}")
 
@@ -173,19 +192,42 @@ def _periods(edges: Sequence[tuple[int, int]], unit: str) -> Any:
 def period_sums(conn: Connection, minute_edges: Sequence[tuple[int, int]]) -> list[tuple[int, ...]]:
     """Per period i (bounds in whole minutes): i, the seven counts, starts, Σ starts·minute,
     Σ start offsets, ends, Σ ends·minute, Σ end offsets, repairs, Σ repair ns, aborted,
-    canceled and succeeded goals."""
-    p = _periods(minute_edges, "minute")
-    m = stat_minutes.c
-    query = (
-        select(p.c.i, *(func.sum(m[flag]) for flag in _FLAGS),
-               func.sum(m.starts), func.sum(m.starts * m.minute), func.sum(m.start_offset_ns),
-               func.sum(m.ends), func.sum(m.ends * m.minute), func.sum(m.end_offset_ns),
-               func.sum(m.repairs), func.sum(m.repair_ns),
-               *(func.sum(m[name]) for name in GOAL_METRICS))
-        .select_from(p.join(stat_minutes, and_(m.minute >= p.c.a, m.minute < p.c.b)))
-        .group_by(p.c.i)
-    )
-    return [tuple(int(v or 0) for v in row) for row in conn.execute(query)]
+    canceled and succeeded goals. Whole hours are read from ``stat_hours`` (an hour's row
+    gives Σ starts·(its first minute) and offsets within the hour: the same Σ start ns), the
+    minutes before the first and after the last whole hour from ``stat_minutes``."""
+    hours: list[tuple[int, int, int]] = []
+    minutes: list[tuple[int, int, int]] = []
+    for i, (a, b) in enumerate(minute_edges):
+        first, last = -(-a // 60), b // 60
+        if first < last:
+            hours.append((i, first, last))
+            minutes.extend((i, x, y) for x, y in ((a, first * 60), (last * 60, b)) if x < y)
+        elif a < b:
+            minutes.append((i, a, b))
+    totals: dict[int, list[int]] = {}
+    for table, key, per_minute, ranges in ((stat_hours, "hour", 60, hours),
+                                           (stat_minutes, "minute", 1, minutes)):
+        if not ranges:
+            continue
+        p = _ranges(ranges, key)
+        m = table.c
+        unit = m[key]
+        query = (
+            select(p.c.i, *(func.sum(m[flag]) for flag in _FLAGS),
+                   func.sum(m.starts), func.sum(m.starts * unit * per_minute),
+                   func.sum(m.start_offset_ns), func.sum(m.ends),
+                   func.sum(m.ends * unit * per_minute), func.sum(m.end_offset_ns),
+                   func.sum(m.repairs), func.sum(m.repair_ns),
+                   *(func.sum(m[name]) for name in GOAL_METRICS))
+            .select_from(p.join(table, and_(unit >= p.c.a, unit < p.c.b)))
+            .group_by(p.c.i)
+        )
+        for row in conn.execute(query):
+            i, *values = (int(v or 0) for v in row)
+            found = totals.setdefault(i, [0] * len(values))
+            for n, value in enumerate(values):
+                found[n] += value
+    return [(i, *totals[i]) for i in sorted(totals)]
 
 
 def busy_windows(conn: Connection, minute_edges: Sequence[tuple[int, int]], minutes: int,
@@ -394,6 +436,11 @@ def differences(conn: Connection, replayed: StatsOutput) -> list[str]:
         select(stat_minutes)).mappings()}
     if stored_minutes != expected_minutes:
         problems.append("stat_minutes")
+    expected_hours = {row["hour"]: row for row in _hour_rows(replayed)}
+    stored_hours = {row["hour"]: dict(row) for row in conn.execute(
+        select(stat_hours)).mappings()}
+    if stored_hours != expected_hours:
+        problems.append("stat_hours")
     if load_tracks(conn) != replayed.tracks:
         problems.append("stat_codes")
     stored_goals = [GoalFact(*row) for row in conn.execute(
