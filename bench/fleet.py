@@ -4,11 +4,15 @@ What it measures (docs/performance.md, "Fleet"), each against a baseline in the 
 
 - **push**: ROBOTS processes, each holding a real robot log (SQLite, RECORDS records made
   through ``FaultLedger.report``), push it to a central (``faultledger http --db
-  postgresql+psycopg://…``) in batches of 1,000 over HTTP, as ``faultledger sync`` does, all
-  at once. Figures: records/s into the central (all records / wall time from the first push
-  to the last answer), p99 of one batch's acknowledgement. Baseline: the same rows written with
-  one ``COPY`` per batch (psycopg) into a table of the same columns in the same PostgreSQL, from
-  the same number of processes: the server's raw ingest, no checks.
+  postgresql+psycopg://…``) over HTTP as ``faultledger sync`` does (its record encoding, its
+  batch sizes: ``fleet/pace.py``), all at once. Each robot's first record is pushed before the
+  timing (its first contact: the central makes the robot's log), and timed apart. Figures:
+  records/s into the central (all records / wall time from the first push to the last
+  answer), p99 of one batch's acknowledgement, CPU per record by process (/proc), and how
+  soon the central answers statistics over everything pushed (its projections follow the
+  pushes, docs/fleet.md). Baseline: the same rows written with one ``COPY`` per 1,000 rows
+  (psycopg) into a table of the same columns in the same PostgreSQL, from the same number of
+  processes: the server's raw ingest, no checks.
 - **single robot**: one robot pushing alone, against raw psycopg inserts (executemany, one
   transaction per 1,000 rows) of the same rows.
 
