@@ -207,9 +207,11 @@ def _together(work: Any, barrier: Any, results: Any, index: int, *args: Any) -> 
         raise
 
 
-def all_at_once(work: Any, jobs: list[tuple[Any, ...]]) -> tuple[list[Timings], float]:
+def all_at_once(work: Any, jobs: list[tuple[Any, ...]], done: Callable[[], Any] = lambda: None
+                ) -> tuple[list[Timings], float]:
     """``work(*job)()`` in one process per job, set up first, then started together: their
-    timings and the CPU seconds they used."""
+    timings and the CPU seconds they used. ``done`` is called as soon as the last one has
+    answered (before the processes end)."""
     barrier = multiprocessing.Barrier(len(jobs))
     results: Any = multiprocessing.Queue()
     processes = [multiprocessing.Process(target=_together, args=(work, barrier, results, n, *job))
@@ -217,6 +219,7 @@ def all_at_once(work: Any, jobs: list[tuple[Any, ...]]) -> tuple[list[Timings], 
     for process in processes:
         process.start()
     found = dict(results.get(timeout=600) for _ in processes)
+    done()
     failed = [item for item in found.values() if isinstance(item, BaseException)]
     if failed:
         raise RuntimeError(f"{len(failed)} of {len(jobs)} processes failed") from failed[0]
@@ -456,8 +459,10 @@ def main() -> int:
                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                 time.sleep(1.0)
             cpu_before = cpu_seconds(process.pid)
-            push_runs, robots_cpu = all_at_once(push_worker, [(url, p) for p in robots])
-            cpu_after = cpu_seconds(process.pid)
+            snapshot: list[dict[str, float]] = []  # taken before the projections begin
+            push_runs, robots_cpu = all_at_once(push_worker, [(url, p) for p in robots],
+                                                lambda: snapshot.append(cpu_seconds(process.pid)))
+            cpu_after = snapshot[0]
             if spy is not None:
                 spy.send_signal(2)
                 spy.wait(60)

@@ -33,9 +33,10 @@ class Context:
     pushes: HeavyReads = field(default_factory=lambda: HeavyReads(
         PUSH_SLOTS, PUSH_QUEUE, PUSH_WAIT_SEC, what="robot log batches",
         settings="{slots} at a time, {queue} waiting"))
-    """Where a fleet central checks and stores robots' batches: two at a time (one checked
-    while the other commits) however many robots push, so threads do not fight over the
-    interpreter and each batch is answered sooner (bench/fleet.py)."""
+    """Where a fleet central checks and stores robots' batches: four at a time however many
+    robots push (a batch spends most of its time waiting for PostgreSQL's round trips, which
+    the others fill; more threads would only fight over the interpreter). Measured with
+    bench/fleet.py, 20 robots: 19,455–22,499 records/s with two, 21,580–30,773 with four."""
 
 
     def robot_logs(self) -> Fleet:
@@ -43,6 +44,6 @@ class Context:
         return self.fleet
 
 
-PUSH_SLOTS = 2
+PUSH_SLOTS = 4
 PUSH_QUEUE = 256
 PUSH_WAIT_SEC = 30.0
