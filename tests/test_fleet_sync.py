@@ -431,6 +431,30 @@ def test_verify_central_names_the_first_seq_of_a_truncated_or_rewritten_log(
     assert "first bad seq: 1201" in cut.stdout
 
 
+def test_verify_central_names_the_robots_other_log_after_its_database_was_replaced(
+        tmp_path: Path, central: Central) -> None:
+    old = tmp_path / "old.db"
+    robot_id, old_ledger = robot_log(old, 30)
+    token = robot_token(central, robot_id, tmp_path / "robot.token")
+    assert sync(old, central, token).returncode == 0
+    new = tmp_path / "new.db"  # the disk was replaced: a new log of the same robot
+    _, new_ledger = robot_log(new, 12, robot_id)
+    assert sync(new, central, token).returncode == 0
+    done = run_cli("verify", "--db", str(new), "--central", central.url, "--token-file",
+                   str(token))
+    assert done.returncode == 0, done.stderr
+    assert (f"the central also holds 1 other log of robot {robot_id}, not in this database (it "
+            f"was replaced since): ledger_id {old_ledger} (seq 1..30") in done.stdout, done.stdout
+    as_json = json.loads(run_cli("verify", "--db", str(new), "--central", central.url,
+                                 "--token-file", str(token), "--json").stdout)
+    assert [log["ledger_id"] for log in as_json["central"]["other_logs"]] == [old_ledger]
+    assert new_ledger != old_ledger
+    alone = run_cli("verify", "--db", str(old), "--central", central.url, "--token-file",
+                    str(token), "--json")
+    assert [log["ledger_id"] for log in json.loads(alone.stdout)["central"]["other_logs"]] == [
+        new_ledger]
+
+
 def test_verify_central_that_is_away_fails_naming_it(tmp_path: Path) -> None:
     robot = tmp_path / "robot.db"
     robot_log(robot, 5)

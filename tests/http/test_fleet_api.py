@@ -70,8 +70,13 @@ def test_push_list_and_compare_with_role_checks(http_server: Callable[..., Serve
     assert {k: item[k] for k in ("robot_id", "ledger_id", "last_seq", "records")} == {
         "robot_id": "robot-a", "ledger_id": ledger_id, "last_seq": head, "records": head}
     assert item["last_hash"] == records[-1].hash and item["lag_seconds"] < 60
-    assert server.client.get("/api/v1/fleet/robots",
-                             headers=bearer(robot_a)).status_code == 403
+    # A robot's token lists that robot's logs only (verify --central names a replaced one).
+    own = server.client.get("/api/v1/fleet/robots", headers=bearer(robot_a))
+    assert own.status_code == 200
+    assert [{**seen, "lag_seconds": 0} for seen in own.json()["items"]] == [
+        {**item, "lag_seconds": 0}]
+    others = server.client.get("/api/v1/fleet/robots", headers=bearer(robot_b))
+    assert others.status_code == 200 and others.json() == {"items": []}
 
     own = server.client.get(PUSH, params={"ledger_id": ledger_id, "after_seq": 50},
                             headers=bearer(robot_a))

@@ -288,11 +288,24 @@ def central_line(check: CentralCheck) -> str:
             f"its {check.compared} records of this log (seq 1..{check.central_seq}) are in "
             "this log, unchanged")
     waiting = (f"; {check.not_pushed} newer records not pushed yet" if check.not_pushed else "")
-    return f"central {check.central}: {held}{waiting}"
+    return f"central {check.central}: {held}{waiting}{others_note(check)}"
+
+
+def others_note(check: CentralCheck) -> str:
+    """The robot's other logs at the central (a replaced database), or nothing."""
+    if not check.other_logs:
+        return ""
+    logs = ", ".join(f"ledger_id {log.ledger_id} (seq 1..{log.last_seq}, last pushed "
+                     f"{log.last_pushed_at})" for log in check.other_logs)
+    count = len(check.other_logs)
+    return (f"; the central also holds {count} other log{'s' if count > 1 else ''} of robot "
+            f"{check.identity.robot_id}, not in this database (it was replaced since): {logs}")
 
 
 def central_json(check: CentralCheck) -> dict[str, Any]:
     return {"url": check.central, "ok": check.ok, "compared": check.compared,
             "central_seq": check.central_seq, "head_seq": check.head_seq,
             "not_pushed": check.not_pushed, "first_bad_seq": check.first_bad_seq,
-            "problem": check.problem}
+            "problem": check.problem,
+            "other_logs": [{"ledger_id": log.ledger_id, "last_seq": log.last_seq,
+                            "last_pushed_at": log.last_pushed_at} for log in check.other_logs]}

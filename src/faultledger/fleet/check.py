@@ -1,14 +1,21 @@
 """`verify --central`: the central as the robot's external witness (docs/fleet.md). Every
 (seq, hash) the central holds for this log's ledger_id must be in the robot's log, unchanged:
 a log truncated, or rewritten and re-chained so that it verifies on its own, is named by the
-first seq that is missing or differs."""
+first seq that is missing or differs. Other logs of the robot the central holds (its database
+was replaced: a new ledger_id) are named too: their records are not in this log."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from faultledger.domain.identity import LedgerIdentity
-from faultledger.fleet.client import CentralClient, RecordsPage, UnknownLedger
+from faultledger.fleet.client import (
+    CentralClient,
+    CentralError,
+    HeldLog,
+    RecordsPage,
+    UnknownLedger,
+)
 from faultledger.fleet.push import RobotLog
 
 PAGE = 10_000
@@ -28,6 +35,9 @@ class CentralCheck:
     """The robot log's newest seq."""
     first_bad_seq: int | None = None
     problem: str | None = None
+    other_logs: tuple[HeldLog, ...] = ()
+    """Other logs of this robot the central holds (a database replaced since): their
+    records are not in this log, and never will be."""
 
     @property
     def ok(self) -> bool:
@@ -43,6 +53,11 @@ def check_against_central(robot_log: RobotLog, client: CentralClient) -> Central
     robot's stored hash; stop at the first that is missing or differs."""
     identity = robot_log.identity()
     head = robot_log.head()
+    try:
+        others = tuple(log for log in client.robots() if log.robot_id == identity.robot_id
+                       and log.ledger_id != identity.ledger_id)
+    except CentralError:  # an older central does not let a robot list its logs
+        others = ()
     after = 0
     compared = 0
     central_seq = 0
@@ -59,12 +74,12 @@ def check_against_central(robot_log: RobotLog, client: CentralClient) -> Central
             stored = mine.get(seq)
             if stored != digest:
                 return CentralCheck(identity, client.shown, compared, central_seq, head, seq,
-                                    _problem(seq, digest, stored, head, central_seq))
+                                    _problem(seq, digest, stored, head, central_seq), others)
             compared += 1
         after = page.items[-1][0]
         if after >= page.last_seq:
             break
-    return CentralCheck(identity, client.shown, compared, central_seq, head)
+    return CentralCheck(identity, client.shown, compared, central_seq, head, other_logs=others)
 
 
 def _problem(seq: int, central_hash: str, stored: str | None, head: int,

@@ -22,6 +22,7 @@ from faultledger.errors import ConfigError, FaultLedgerError, Reason
 from faultledger.service.tokens import PREFIX
 
 RECORDS_PATH = "api/v1/fleet/records"
+ROBOTS_PATH = "api/v1/fleet/robots"
 """POST: push a batch; GET: the (seq, hash) pairs the central holds. Relative to the central's
 URL, so a central behind a proxy path (https://host/faultledger/) works."""
 CONNECT_TIMEOUT_SEC = 5.0
@@ -123,6 +124,16 @@ class RecordsPage:
 
     items: list[tuple[int, str]]
     last_seq: int
+
+
+@dataclass(frozen=True, slots=True)
+class HeldLog:
+    """One robot log as ``GET /api/v1/fleet/robots`` lists it."""
+
+    robot_id: str
+    ledger_id: str
+    last_seq: int
+    last_pushed_at: str
 
 
 def check_central_url(text: str) -> str:
@@ -255,6 +266,18 @@ class CentralClient:
             raise CentralAnswerError(f"the central {self.shown} answered GET {RECORDS_PATH} "
                                      f"without items of seq and hash: {_clip(answer.text)}"
                                      ) from None
+
+    def robots(self) -> list[HeldLog]:
+        """The robot logs the central holds (a robot's token: only that robot's)."""
+        answer = self._send("GET", ROBOTS_PATH)
+        data = self._json(answer)
+        try:
+            return [HeldLog(str(item["robot_id"]), str(item["ledger_id"]),
+                            int(item["last_seq"]), str(item["last_pushed_at"]))
+                    for item in data["items"]]
+        except (KeyError, TypeError, ValueError):
+            raise CentralAnswerError(f"the central {self.shown} answered GET {ROBOTS_PATH} "
+                                     f"without robot logs: {_clip(answer.text)}") from None
 
     def _send(self, method: str, path: str, **options: Any) -> httpx.Response:
         try:

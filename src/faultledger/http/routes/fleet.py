@@ -72,7 +72,6 @@ def _may_push(principal: Principal, robot_id: object) -> None:
 def router(context: Context) -> APIRouter:
     api = APIRouter(prefix="/api/v1/fleet", tags=["fleet"])
     push_permission = Depends(context.auth.need(Permission.PUSH))
-    read_permission = Depends(context.auth.need(Permission.READ))
 
     def store(raw: bytes, principal: Principal) -> JSONResponse:
         try:
@@ -101,8 +100,14 @@ def router(context: Context) -> APIRouter:
         async with context.pushes.slot():
             return await context.pushes.call(store, raw, principal)
 
-    @api.get("/robots", summary="Every robot log the central holds, and how far behind it is")
-    def robots(principal: Principal = read_permission) -> dict[str, Any]:
+    @api.get("/robots", summary="Every robot log the central holds, and how far behind it is "
+             "(role robot: its own logs)")
+    def robots(authorization: Annotated[str | None, Header()] = None) -> dict[str, Any]:
+        principal = context.auth.principal(authorization)
+        if not (principal.may(Permission.READ) or principal.may(Permission.PUSH)):
+            raise ApiError(Reason.FORBIDDEN, f"token {principal.name!r} has role "
+                           f"{principal.role.value}, which may not list robot logs")
+        only = None if principal.may(Permission.READ) else principal.name
         return {"items": [{
             "robot_id": c.robot_id, "ledger_id": c.ledger_id, "last_seq": c.last_seq,
             "last_hash": c.last_hash, "records": c.records,
@@ -111,7 +116,7 @@ def router(context: Context) -> APIRouter:
             "complete_until": None if c.complete_until is None
             else c.complete_until.isoformat().replace("+00:00", "Z"),
             "lag_records": c.lag_records,
-        } for c in context.robot_logs().robots()]}
+        } for c in context.robot_logs().robots(robot_id=only)]}
 
     @api.get("/records", summary="Seqs and hashes of one log as the central holds it "
              "(what `verify --central` compares)", response_model=None)
