@@ -22,9 +22,10 @@ from faultledger.errors import ConfigError, FaultLedgerError, Reason
 from faultledger.service.tokens import PREFIX
 
 RECORDS_PATH = "api/v1/fleet/records"
-ROBOTS_PATH = "api/v1/fleet/robots"
 """POST: push a batch; GET: the (seq, hash) pairs the central holds. Relative to the central's
 URL, so a central behind a proxy path (https://host/faultledger/) works."""
+ROBOTS_PATH = "api/v1/fleet/robots"
+"""GET: the robot logs the central holds (a robot's token: its own)."""
 CONNECT_TIMEOUT_SEC = 5.0
 ANSWER_TIMEOUT_SEC = 30.0
 """How long the central may take to answer a batch (it checks and stores up to 1,000

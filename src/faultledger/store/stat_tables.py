@@ -40,7 +40,6 @@ CHECKPOINT = "statistics"
 created them, so the first open fills them from the whole log)."""
 NS_PER_MINUTE = 60 * 1_000_000_000
 NS_PER_HOUR = 60 * NS_PER_MINUTE
-_FLAGS = STAT_FLAGS
 _INSERT_FACT = stat_facts.insert()
 _INSERT_GOAL = stat_goals.insert()
 _CODE_CHUNK = 500
@@ -84,7 +83,7 @@ def _sum_rows(output: StatsOutput, unit_ns: int, key: str) -> list[dict[str, Any
         row = sums.get(unit)
         if row is None:
             row = sums[unit] = dict.fromkeys(
-                (*_FLAGS, "starts", "start_offset_ns", "ends", "end_offset_ns", "repairs",
+                (*STAT_FLAGS, "starts", "start_offset_ns", "ends", "end_offset_ns", "repairs",
                  "repair_ns", *GOAL_METRICS), 0)
         return unit, row
 
@@ -93,7 +92,7 @@ def _sum_rows(output: StatsOutput, unit_ns: int, key: str) -> list[dict[str, Any
         row[GOAL_METRIC_OF[goal.status]] += 1
     for fact in output.facts:
         _, row = bucket(fact.at_ns)
-        for flag in _FLAGS:
+        for flag in STAT_FLAGS:
             row[flag] += getattr(fact, flag)
     for episode in output.started:
         unit, row = bucket(episode.start_ns)
@@ -213,7 +212,7 @@ def period_sums(conn: Connection, minute_edges: Sequence[tuple[int, int]]) -> li
         m = table.c
         unit = m[key]
         query = (
-            select(p.c.i, *(func.sum(m[flag]) for flag in _FLAGS),
+            select(p.c.i, *(func.sum(m[flag]) for flag in STAT_FLAGS),
                    func.sum(m.starts), func.sum(m.starts * unit * per_minute),
                    func.sum(m.start_offset_ns), func.sum(m.ends),
                    func.sum(m.ends * unit * per_minute), func.sum(m.end_offset_ns),
