@@ -257,6 +257,54 @@ def test_a_robots_statistics_at_the_central_equal_its_own_figure_for_figure(
             assert row.mttr_seconds == pytest.approx(expected)
 
 
+def flood_robot_log(path: Path, robot_id: str, codes: int) -> str:
+    """``codes`` confirmations in the first ten minutes of 2026-11-20, half of them in the
+    first minute's second half (a partial minute for a range starting at 00:00:30)."""
+    url = f"sqlite:///{path}"
+    start = datetime(2026, 11, 20, 0, 0, tzinfo=UTC)
+    with FaultLedger.open(url, policy=Policy(confirmation_threshold=-2), robot_id=robot_id,
+                          background=False) as robot:
+        for n in range(codes):
+            at = (start + timedelta(seconds=31 + n) if n < codes // 2
+                  else start + timedelta(minutes=1 + n % 8, seconds=n))
+            for repeat in range(3):
+                robot.report(f"FLOOD_{n:02d}", "FAILED", 2, "", "/base",
+                             at=at + timedelta(milliseconds=repeat))
+        robot.report("HW_BASE_EMERGENCY_STOP", "FAILED", 2, "", "/base",
+                     at=start + timedelta(seconds=45))
+    return url
+
+
+def test_many_robots_read_at_once_give_each_robots_own_figures_on_any_bounds(
+        central: fleet.Fleet, tmp_path: Path) -> None:
+    """On PostgreSQL one statement per figure reads every robot's log (``Fleet.stats``): with
+    bounds off whole minutes, a flood that only the partial first minute tips over the
+    limit, and robots of different sizes, each robot's rows are still its own."""
+    urls = {"robot-a": timed_robot_log(tmp_path / "a.db", "robot-a", 3, hours=8),
+            "robot-b": flood_robot_log(tmp_path / "b.db", "robot-b", 12),
+            "robot-c": flood_robot_log(tmp_path / "c.db", "robot-c", 8)}
+    for url in urls.values():
+        robot_id, ledger_id, records = records_of(url)
+        central.push(fleet.PushBatch(robot_id, ledger_id, records[-1].seq, records))
+    as_of = datetime(2026, 11, 22, tzinfo=UTC)
+    for by, since, until in (("hour", "2026-11-20T00:00:30+00:00", "2026-11-20T07:59:45+00:00"),
+                             ("10min", "2026-11-20T00:00:00+00:00", "2026-11-20T02:00:00+00:00"),
+                             ("shift", "2026-11-19T22:00:00+00:00", "2026-11-21T06:00:00+00:00")):
+        at_central = central.stats(by, since, until, group_by=["robot"], as_of=as_of)
+        for name, url in urls.items():
+            with FaultLedger.open(url) as robot:
+                robot.calendar = central.central.calendar
+                own = robot.stats(by, since, until, as_of=as_of)
+            rows = [row for row in at_central if row.group["robot"] == name]
+            assert [figures(row) for row in rows] == [figures(row) for row in own], (by, name)
+    first = central.stats("hour", "2026-11-20T00:00:30+00:00", "2026-11-20T01:00:00+00:00",
+                          group_by=["robot"], as_of=as_of)
+    floods = {row.group["robot"]: row.flood_windows for row in first}
+    estops = {row.group["robot"]: row.estops for row in first}
+    assert floods == {"robot-a": 0, "robot-b": 1, "robot-c": 0}  # b: 6 + 6 > 10, c: 4 + 4
+    assert estops["robot-b"] == estops["robot-c"] == 1
+
+
 def test_a_robot_that_pushed_part_of_its_log_has_provisional_periods(
         central: fleet.Fleet, tmp_path: Path) -> None:
     robot_id, ledger_id, records = records_of(robot_log(tmp_path / "a.db", "robot-a", 40))

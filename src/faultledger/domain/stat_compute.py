@@ -221,14 +221,18 @@ class PeriodSums:
     partial_goals: Sequence[GoalFact] = ()
     partial_episodes: Sequence[Episode] = ()
     """Episodes starting, or ending by a record, in ``partial`` (each once)."""
-    estops_at: Sequence[int] = ()
-    """When each e-stop activation of the range happened (ns): e-stops are rare, so they are
-    read one by one rather than summed per minute."""
+    estops: Mapping[int, int] = field(default_factory=dict)
+    """Per period i: activations of the e-stop codes (counted by the store: which codes are
+    e-stops is the config's choice, so they are not summed per minute)."""
 
 
-def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> list[StatsRow]:
+def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int, *,
+              group: Mapping[str, Any] | None = None,
+              complete_until_ns: int | None = None) -> list[StatsRow]:
     """Rows over all codes from per-period sums of the per-minute table, plus the facts and
-    episode edges of a partial first and last minute.
+    episode edges of a partial first and last minute. ``group``: the rows' group (a fleet
+    central's robot); ``complete_until_ns``: each row is ``complete`` when this reaches its
+    period's end (how far a robot has pushed; None: the log's own statistics).
 
     Active time per period [A, B) is Σ ends − Σ starts + B·open(B) − A·open(A), the sums
     running over the episode edges inside the period (docs/statistics.md).
@@ -249,10 +253,8 @@ def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> lis
         tally.repair_ns = row[15]
         tally.goals = list(row[16:19])
     _add_partial(tallies, edges, bounds, data)
-    for at_ns in data.estops_at:
-        found = bounds.index(at_ns)
-        if found is not None:
-            tallies[found].estops += 1
+    for i, count in data.estops.items():
+        tallies[i].estops = count
     first = bounds.starts[0]
     open_now = data.closed_open_at_start
     for _, start, _ in data.open_spans:
@@ -276,7 +278,9 @@ def from_sums(periods: Sequence[Period], data: PeriodSums, as_of_ns: int) -> lis
     stale = _stale_counts(bounds, (*data.long_spans, *data.open_spans), as_of_ns)
     for tally, count in zip(tallies, stale, strict=True):
         tally.stale_count = count
-    return [_row(p, {}, tallies[i], bounds, i) for i, p in enumerate(periods)]
+    return [_row(p, dict(group or {}), tallies[i], bounds, i,
+                 None if complete_until_ns is None else complete_until_ns >= bounds.ends[i])
+            for i, p in enumerate(periods)]
 
 
 def _add_partial(tallies: list[_Tally], edges: list[list[int]], bounds: _Bounds,
@@ -349,7 +353,7 @@ def _stale_counts(bounds: _Bounds, spans: Iterable[Span], as_of_ns: int) -> list
 
 
 def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
-         i: int) -> StatsRow:
+         i: int, complete: bool | None = None) -> StatsRow:
     start, end = bounds.starts[i], bounds.ends[i]
     length_ns = end - start
     seconds = length_ns / NS_PER_SECOND
@@ -383,6 +387,7 @@ def _row(period: Period, group: dict[str, Any], tally: _Tally, bounds: _Bounds,
         stale_codes=tally.stale_count if tally.stale_count is not None else len(tally.stale),
         top10_share=top / confirmations if confirmations else None,
         **_goal_figures(tally.goals),
+        complete=complete,
     )
 
 

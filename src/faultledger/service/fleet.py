@@ -502,37 +502,70 @@ class Fleet:
         several: dict[str, int] = {}
         for chain in chains:
             several[chain.robot_id] = several.get(chain.robot_id, 0) + 1
-        merged: dict[tuple[object, ...], list[StatsRow]] = {}
-        ranks: dict[tuple[object, ...], tuple[object, ...]] = {}
-        order: list[tuple[object, ...]] = []
-        query = statistics.StatsQuery(by, since, until, codes, log_keys, self.central.calendar,
-                                      as_of, self.central.estop_codes, budget)
-        def compute(chain: fleet_log.Chain) -> list[StatsRow]:
-            self._backlog.current(chain.chain_id)
-            return statistics.compute(self._db(chain), query)
-
-        # Two logs at a time: while one waits for the database the other is folded.
-        with ThreadPoolExecutor(STATS_THREADS, thread_name_prefix="faultledger-fleet") as pool:
-            computed = list(pool.map(compute, chains))
-        for chain, rows in zip(chains, computed, strict=True):
+        groups: list[tuple[dict[str, str | int], dict[str, str | int]]] = []
+        for chain in chains:
             robot_labels = labels.get(chain.robot_id, {})
             fleet_group: dict[str, str | int] = {
                 "robot": chain.robot_id, "line": robot_labels.get("line", ""),
                 "site": robot_labels.get("site", "")}
+            replaced: dict[str, str | int] = {}
+            if "robot" in fleet_keys and several[chain.robot_id] > 1:
+                replaced["ledger_id"] = chain.ledger_id  # a replaced database: never merged
+            groups.append(({k: fleet_group[k] for k in fleet_keys}, replaced))
+        query = statistics.StatsQuery(by, since, until, codes, log_keys, self.central.calendar,
+                                      as_of, self.central.estop_codes, budget)
+        merged: dict[tuple[object, ...], list[StatsRow]] = {}
+        ranks: dict[tuple[object, ...], tuple[object, ...]] = {}
+        order: list[tuple[object, ...]] = []
+        for rows in self._compute(chains, groups, query):
             for row in rows:
-                group = {**{k: fleet_group[k] for k in fleet_keys}, **row.group}
-                if "robot" in fleet_keys and several[chain.robot_id] > 1:
-                    group["ledger_id"] = chain.ledger_id  # a replaced database: never merged
-                done = (chain.complete_until_ns >= to_ns(row.period.end)
-                        if chain.complete_until_ns else False)
-                key = (row.period.id, row.period.start, *sorted(group.items()))
-                if key not in merged:
-                    merged[key] = []
+                key = (row.period.id, row.period.start, *sorted(row.group.items()))
+                found = merged.get(key)
+                if found is None:
+                    merged[key] = found = []
                     order.append(key)
-                    ranks[key] = (row.period.start, *(str(value) for value in group.values()))
-                merged[key].append(replace(row, group=group, complete=done))
+                    ranks[key] = (row.period.start, *(str(value) for value in row.group.values()))
+                found.append(row)
         order.sort(key=ranks.__getitem__)  # periods in time order, then the group's values
         return [merge(merged[key], merged[key][0].group) for key in order]
+
+    def _compute(self, chains: Sequence[fleet_log.Chain],
+                 groups: Sequence[tuple[dict[str, str | int], dict[str, str | int]]],
+                 query: statistics.StatsQuery) -> list[list[StatsRow]]:
+        """Each log's statistics rows, in the log's group (its fleet keys, then the log's
+        own keys, then its ledger_id where the robot has several logs) and ``complete`` as
+        far as the robot has pushed. On PostgreSQL, where the sums answer, one statement
+        per figure reads every log (each in its schema); else log by log, a few at a time
+        (while one waits for the database another is folded)."""
+        for chain in chains:
+            self._migrated(chain)
+            self._backlog.current(chain.chain_id)
+        if self.central._db.dialect == "postgresql" and statistics.from_sums(query):
+            schemas = [fleet_log.schema(chain.chain_id) for chain in chains]
+            merged_groups = [{**a, **b} for a, b in groups]
+            complete = [chain.complete_until_ns for chain in chains]
+            # Two halves at once: the server works on one while the other's rows are folded.
+            half = (len(chains) + 1) // 2
+            parts = [part for part in (slice(0, half), slice(half, len(chains)))
+                     if part.start < part.stop]
+
+            def in_schemas(part: slice) -> list[list[StatsRow]]:
+                return statistics.compute_in_schemas(
+                    self.central._db, schemas[part], query, merged_groups[part],
+                    complete[part])
+
+            with ThreadPoolExecutor(2, thread_name_prefix="faultledger-fleet") as pool:
+                return [rows for done in pool.map(in_schemas, parts) for rows in done]
+
+        def compute(chain: fleet_log.Chain,
+                    group: tuple[dict[str, str | int], dict[str, str | int]]) -> list[StatsRow]:
+            fleet_part, replaced = group
+            return [replace(row, group={**fleet_part, **row.group, **replaced},
+                            complete=chain.complete_until_ns >= to_ns(row.period.end))
+                    for row in statistics.compute(self._db(chain), query)]
+
+        with ThreadPoolExecutor(STATS_THREADS, thread_name_prefix="faultledger-fleet") as pool:
+            return list(pool.map(compute, chains, groups))
 
     def verify(self, robot_id: str, ledger_id: str | None = None) -> list[ChainCheck]:
         """``verify`` of every log of a robot as the central holds it: the hash chain, the

@@ -3,19 +3,17 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from fnmatch import fnmatchcase
-
-from sqlalchemy import Connection
 
 from faultledger.domain import stat_compute, validation
 from faultledger.domain.clock import MAX_TIME, MIN_TIME, NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.periods import PERIOD_KINDS, parse_bound, periods
 from faultledger.domain.shifts import Period, ShiftCalendar
 from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES, FAULT_KEYS, GROUP_KEYS, StatsRow
-from faultledger.domain.statistics import Episode
+from faultledger.domain.statistics import Episode, GoalFact, StatFact
 from faultledger.errors import InvalidInputError
 from faultledger.store import stat_tables
 from faultledger.store.database import Database
@@ -214,8 +212,9 @@ def compute(db: Database, query: StatsQuery) -> list[StatsRow]:
         return []
     budget = query.budget
     with db.reading() as conn:
-        if query.codes is None and not query.group_by and query.inner_minute_aligned():
-            return stat_compute.from_sums(query.periods, _sums(conn, query), query.as_of_ns)
+        if from_sums(query):
+            [sums] = _sums(stat_tables.Logs(conn), query)
+            return stat_compute.from_sums(query.periods, sums, query.as_of_ns)
         read_goals = not query.group_by or "action" in query.group_by
         read_faults = "action" not in query.group_by
         only = None
@@ -242,6 +241,31 @@ def compute(db: Database, query: StatsQuery) -> list[StatsRow]:
                                                len(query.periods))) from None
 
 
+def from_sums(query: StatsQuery) -> bool:
+    """Whether the per-minute and per-hour sums answer ``query`` (all codes, no grouping,
+    inner period edges on whole minutes)."""
+    return query.codes is None and not query.group_by and query.inner_minute_aligned()
+
+
+def compute_in_schemas(db: Database, schemas: Sequence[str], query: StatsQuery,
+                       groups: Sequence[Mapping[str, str | int]],
+                       complete_until_ns: Sequence[int]) -> list[list[StatsRow]]:
+    """``compute`` of many logs of one PostgreSQL database, each in its own schema (a fleet
+    central's robot logs), where the sums answer (``from_sums``): each read is one
+    statement over every log, in one snapshot. The rows of each log, in ``schemas`` order,
+    are those ``compute`` gives for it alone, in the log's group (``groups``) and marked
+    complete up to where the log is complete (``complete_until_ns``)."""
+    if not from_sums(query):
+        raise ValueError("compute_in_schemas answers from the sums only")
+    if not query.periods:
+        return [[] for _ in schemas]
+    with db.reading() as conn:
+        found = _sums(stat_tables.Logs(conn, schemas), query)
+    return [stat_compute.from_sums(query.periods, sums, query.as_of_ns, group=group,
+                                   complete_until_ns=complete)
+            for sums, group, complete in zip(found, groups, complete_until_ns, strict=True)]
+
+
 def _whole_minutes(since_ns: int, until_ns: int) -> tuple[int, int, list[tuple[int, int]]]:
     """The whole minutes [a, b) of [since, until) in ns, and the partial rest as ns ranges."""
     first = -(-since_ns // NS_PER_MINUTE) * NS_PER_MINUTE
@@ -251,33 +275,58 @@ def _whole_minutes(since_ns: int, until_ns: int) -> tuple[int, int, list[tuple[i
     return first, last, [(a, b) for a, b in ((since_ns, first), (last, until_ns)) if a < b]
 
 
-def _sums(conn: Connection, query: StatsQuery) -> stat_compute.PeriodSums:
+def _sums(logs: stat_tables.Logs, query: StatsQuery) -> list[stat_compute.PeriodSums]:
     edges = [(to_ns(p.start), to_ns(p.end)) for p in query.periods]
     first, last, partial = _whole_minutes(query.since_ns, query.until_ns)
     minutes = []
     for a, b in edges:  # inner edges are whole minutes (``inner_minute_aligned``)
         begin = max(a, first)
         minutes.append((begin // NS_PER_MINUTE, max(begin, min(b, last)) // NS_PER_MINUTE))
-    facts = [f for a, b in partial for f in stat_tables.facts(conn, a, b, None)]
-    goals = [g for a, b in partial for g in stat_tables.goals(conn, a, b)]
-    episodes: dict[int, Episode] = {}
+    count = len(logs)
+    facts: list[list[StatFact]] = [[] for _ in range(count)]
+    goals: list[list[GoalFact]] = [[] for _ in range(count)]
+    episodes: list[dict[int, Episode]] = [{} for _ in range(count)]
     for a, b in partial:
-        episodes.update((e.start_seq, e) for e in stat_tables.edge_episodes(conn, a, b))
-    partial_confirmations = sum(f.confirmation for f in facts)
-    return stat_compute.PeriodSums(
-        sums=stat_tables.period_sums(conn, minutes),
-        busy_windows=stat_tables.busy_windows(
-            conn, minutes, stat_compute.FLOOD_WINDOW_NS // NS_PER_MINUTE,
-            stat_compute.FLOOD_ABOVE - partial_confirmations),
-        top_confirmations=stat_tables.top_confirmations(conn, edges, stat_compute.TOP),
-        chattering=stat_tables.chattering(conn, edges),
-        closed_open_at_start=stat_tables.closed_open_at(conn, query.since_ns),
-        open_spans=stat_tables.open_spans(conn),
-        long_spans=stat_tables.long_spans(conn, query.since_ns, query.until_ns,
-                                          stat_compute.STALE_AFTER_NS),
-        partial=partial, partial_facts=facts, partial_goals=goals,
-        partial_episodes=list(episodes.values()),
-        estops_at=stat_tables.activation_times(
-            conn, query.since_ns, query.until_ns,
-            [code for code in stat_tables.codes(conn) if query.is_estop(code)]),
-    )
+        for log_facts, more in zip(facts, stat_tables.facts_of(logs, a, b), strict=True):
+            log_facts.extend(more)
+        for found_goals, more_goals in zip(goals, stat_tables.goals_of(logs, a, b),
+                                           strict=True):
+            found_goals.extend(more_goals)
+        for by_start, edge in zip(episodes, stat_tables.edge_episodes(logs, a, b),
+                                  strict=True):
+            by_start.update((e.start_seq, e) for e in edge)
+    estop_codes = sorted({code for log_codes in stat_tables.codes_of(logs)
+                          for code in log_codes if query.is_estop(code)})
+    columns = zip(
+        stat_tables.period_sums(logs, minutes),
+        stat_tables.top_confirmations(logs, edges, stat_compute.TOP),
+        stat_tables.chattering(logs, edges),
+        stat_tables.closed_open_at(logs, query.since_ns),
+        stat_tables.open_spans(logs),
+        stat_tables.long_spans(logs, query.since_ns, query.until_ns,
+                               stat_compute.STALE_AFTER_NS),
+        stat_tables.estops(logs, edges, estop_codes),
+        facts, goals, episodes, strict=True)
+    made: list[stat_compute.PeriodSums] = []
+    busy = _busy_windows(logs, minutes, facts)
+    for (sums, top, chattering, closed_open, open_spans, long_spans, estops, log_facts,
+         log_goals, log_episodes), windows in zip(columns, busy, strict=True):
+        made.append(stat_compute.PeriodSums(
+            sums=sums, busy_windows=windows, top_confirmations=top, chattering=chattering,
+            closed_open_at_start=closed_open, open_spans=open_spans, long_spans=long_spans,
+            partial=partial, partial_facts=log_facts, partial_goals=log_goals,
+            partial_episodes=list(log_episodes.values()), estops=estops))
+    return made
+
+
+def _busy_windows(logs: stat_tables.Logs, minutes: list[tuple[int, int]],
+                  facts: list[list[StatFact]]) -> list[list[tuple[int, int, int]]]:
+    """Per log, the windows that may be in flood: more confirmations in whole minutes than
+    the flood limit less those of the log's partial minutes (so the one read serves every
+    log, it asks for the lowest such threshold and each log keeps what it needs)."""
+    partial = [sum(f.confirmation for f in log_facts) for log_facts in facts]
+    above = [stat_compute.FLOOD_ABOVE - n for n in partial]
+    found = stat_tables.busy_windows(logs, minutes,
+                                     stat_compute.FLOOD_WINDOW_NS // NS_PER_MINUTE, min(above))
+    return [[w for w in windows if w[2] > least] for windows, least in zip(found, above,
+                                                                           strict=True)]

@@ -19,6 +19,7 @@ from sqlalchemy import (
     select,
     text,
 )
+from sqlalchemy import table as table_clause
 
 from faultledger.domain.stat_rows import GOAL_METRIC_OF, GOAL_METRICS
 from faultledger.domain.statistics import CodeTrack, Episode, GoalFact, StatFact, StatsOutput
@@ -169,31 +170,63 @@ def load_tracks(conn: Connection) -> dict[str, CodeTrack]:
 
 
 # -- reads -------------------------------------------------------------------------------------
-def _periods(edges: Sequence[tuple[int, int]], unit: str) -> Any:
-    """The periods as a table p(i, a, b) to join against (bounds in ``unit``)."""
-    return _ranges([(i, a, b) for i, (a, b) in enumerate(edges)], unit)
+def _values(rows: Sequence[tuple[int, int, int]]) -> str:
+    """Ranges (i, a, b) as a SQL VALUES list: integer literals (``int()`` makes that safe).
+    Bound parameters would hit SQLite's variable limit at ~10,000 periods, and SQLAlchemy
+    needs ~0.5 ms per row to compile a VALUES construct."""
+    return ",".join(f"({int(i)},{int(a)},{int(b)})" for i, a, b in rows)
 
 
 def _ranges(rows: Sequence[tuple[int, int, int]], unit: str) -> Any:
     """Ranges (i, a, b) as a table p(i, a, b) to join against (bounds in ``unit``; an i may
-    have several ranges).
-
-    The rows are written into the SQL as integer literals (``int()`` makes that safe): bound
-    parameters would hit SQLite's variable limit at ~10,000 periods, and SQLAlchemy needs
-    ~0.5 ms per row to compile a VALUES construct.
-    """
-    values = ",".join(f"({int(i)},{int(a)},{int(b)})" for i, a, b in rows)
-    return text(f"SELECT column1 AS i, column2 AS a, column3 AS b FROM (VALUES {values}) AS v"
-                ).columns(column("i", Integer), column("a", BigInteger),
-                          column("b", BigInteger)).cte(f"p_{unit}")
+    have several ranges), a CTE of the statement."""
+    return text(f"SELECT column1 AS i, column2 AS a, column3 AS b FROM (VALUES {_values(rows)}) "
+                "AS v").columns(column("i", Integer), column("a", BigInteger),
+                                column("b", BigInteger)).cte(f"p_{unit}")
 
 
-def period_sums(conn: Connection, minute_edges: Sequence[tuple[int, int]]) -> list[tuple[int, ...]]:
-    """Per period i (bounds in whole minutes): i, the seven counts, starts, Σ starts·minute,
-    Σ start offsets, ends, Σ ends·minute, Σ end offsets, repairs, Σ repair ns, aborted,
-    canceled and succeeded goals. Whole hours are read from ``stat_hours`` (an hour's row
-    gives Σ starts·(its first minute) and offsets within the hour: the same Σ start ns), the
-    minutes before the first and after the last whole hour from ``stat_minutes``."""
+class Logs:
+    """Where the statistics reads below look: one log (``conn``'s own tables) or many logs of
+    one PostgreSQL database (``schemas``, a fleet central's robot logs: one statement reads
+    them all). Each read answers per log, in this order."""
+
+    def __init__(self, conn: Connection, schemas: Sequence[str] | None = None) -> None:
+        self.conn = conn
+        self.schemas = schemas
+        self._shared: dict[str, str] = {}
+
+    def __len__(self) -> int:
+        return 1 if self.schemas is None else len(self.schemas)
+
+    def ranges(self, rows: Sequence[tuple[int, int, int]], unit: str) -> Any:
+        """``_ranges`` for the next read; over many logs written once for all of them (a
+        copy per log would be planned once per log)."""
+        if self.schemas is None:
+            return _ranges(rows, unit)
+        name = f"p_{unit}"
+        self._shared[name] = f"{name}(i, a, b) AS MATERIALIZED (VALUES {_values(rows)})"
+        return table_clause(name, column("i", Integer), column("a", BigInteger),
+                     column("b", BigInteger))
+
+    def periods(self, edges: Sequence[tuple[int, int]], unit: str) -> Any:
+        """The periods as a table p(i, a, b) to join against (bounds in ``unit``)."""
+        return self.ranges([(i, a, b) for i, (a, b) in enumerate(edges)], unit)
+
+    def rows(self, query: Any) -> list[list[tuple[Any, ...]]]:
+        if self.schemas is None:
+            return [[tuple(row) for row in self.conn.execute(query)]]
+        shared, self._shared = list(self._shared.values()), {}
+        return fastpath.fetch_all_in_schemas(self.conn, query, self.schemas, shared)
+
+
+def period_sums(logs: Logs, minute_edges: Sequence[tuple[int, int]]
+                ) -> list[list[tuple[int, ...]]]:
+    """Per log, per period i (bounds in whole minutes): i, the seven counts, starts,
+    Σ starts·minute, Σ start offsets, ends, Σ ends·minute, Σ end offsets, repairs, Σ repair
+    ns, aborted, canceled and succeeded goals. Whole hours are read from ``stat_hours`` (an
+    hour's row gives Σ starts·(its first minute) and offsets within the hour: the same
+    Σ start ns), the minutes before the first and after the last whole hour from
+    ``stat_minutes``."""
     hours: list[tuple[int, int, int]] = []
     minutes: list[tuple[int, int, int]] = []
     for i, (a, b) in enumerate(minute_edges):
@@ -203,12 +236,12 @@ def period_sums(conn: Connection, minute_edges: Sequence[tuple[int, int]]) -> li
             minutes.extend((i, x, y) for x, y in ((a, first * 60), (last * 60, b)) if x < y)
         elif a < b:
             minutes.append((i, a, b))
-    totals: dict[int, list[int]] = {}
+    totals: list[dict[int, list[int]]] = [{} for _ in range(len(logs))]
     for table, key, per_minute, ranges in ((stat_hours, "hour", 60, hours),
                                            (stat_minutes, "minute", 1, minutes)):
         if not ranges:
             continue
-        p = _ranges(ranges, key)
+        p = logs.ranges(ranges, key)
         m = table.c
         unit = m[key]
         query = (
@@ -221,19 +254,22 @@ def period_sums(conn: Connection, minute_edges: Sequence[tuple[int, int]]) -> li
             .select_from(p.join(table, and_(unit >= p.c.a, unit < p.c.b)))
             .group_by(p.c.i)
         )
-        for row in conn.execute(query):
-            i, *values = (int(v or 0) for v in row)
-            found = totals.setdefault(i, [0] * len(values))
-            for n, value in enumerate(values):
-                found[n] += value
-    return [(i, *totals[i]) for i in sorted(totals)]
+        for log_totals, rows in zip(totals, logs.rows(query), strict=True):
+            for row in rows:
+                i, *values = (int(v or 0) for v in row)
+                found = log_totals.get(i)
+                if found is None:
+                    log_totals[i] = values
+                else:
+                    log_totals[i] = [a + b for a, b in zip(found, values, strict=True)]
+    return [[(i, *log_totals[i]) for i in sorted(log_totals)] for log_totals in totals]
 
 
-def busy_windows(conn: Connection, minute_edges: Sequence[tuple[int, int]], minutes: int,
-                 above: int) -> list[tuple[int, int, int]]:
-    """(period i, window, confirmations) of grid windows of ``minutes`` with more than
-    ``above`` confirmations inside period i."""
-    p = _periods(minute_edges, "minute")
+def busy_windows(logs: Logs, minute_edges: Sequence[tuple[int, int]], minutes: int,
+                 above: int) -> list[list[tuple[int, int, int]]]:
+    """Per log: (period i, window, confirmations) of grid windows of ``minutes`` with more
+    than ``above`` confirmations inside period i."""
+    p = logs.periods(minute_edges, "minute")
     m = stat_minutes.c
     window = (m.minute // minutes).label("w")
     total = func.sum(m.confirmation)
@@ -244,13 +280,14 @@ def busy_windows(conn: Connection, minute_edges: Sequence[tuple[int, int]], minu
         .group_by(p.c.i, window)
         .having(total > above)
     )
-    return [(int(i), int(w), int(n)) for i, w, n in conn.execute(query)]
+    return [[(int(i), int(w), int(n)) for i, w, n in rows] for rows in logs.rows(query)]
 
 
-def top_confirmations(conn: Connection, edges: Sequence[tuple[int, int]],
-                      top: int) -> dict[int, int]:
-    """Per period i (bounds in ns): confirmations of its ``top`` most confirmed codes."""
-    p = _periods(edges, "ns")
+def top_confirmations(logs: Logs, edges: Sequence[tuple[int, int]],
+                      top: int) -> list[dict[int, int]]:
+    """Per log, per period i (bounds in ns): confirmations of its ``top`` most confirmed
+    codes."""
+    p = logs.periods(edges, "ns")
     f = stat_facts.c
     per_code = (
         select(p.c.i.label("i"), func.count().label("n"))
@@ -266,12 +303,12 @@ def top_confirmations(conn: Connection, edges: Sequence[tuple[int, int]],
     ).subquery()
     query = (select(ranked.c.i, func.sum(ranked.c.n)).where(ranked.c.rank <= top)
              .group_by(ranked.c.i))
-    return {int(i): int(n) for i, n in conn.execute(query)}
+    return [{int(i): int(n) for i, n in rows} for rows in logs.rows(query)]
 
 
-def chattering(conn: Connection, edges: Sequence[tuple[int, int]]) -> dict[int, int]:
-    """Per period i (bounds in ns): distinct codes with a chattering activation."""
-    p = _periods(edges, "ns")
+def chattering(logs: Logs, edges: Sequence[tuple[int, int]]) -> list[dict[int, int]]:
+    """Per log, per period i (bounds in ns): distinct codes with a chattering activation."""
+    p = logs.periods(edges, "ns")
     f = stat_facts.c
     query = (
         select(p.c.i, func.count(f.fault_code.distinct()))
@@ -279,41 +316,82 @@ def chattering(conn: Connection, edges: Sequence[tuple[int, int]]) -> dict[int, 
                                              f.at_ns < p.c.b)))
         .group_by(p.c.i)
     )
-    return {int(i): int(n) for i, n in conn.execute(query)}
+    return [{int(i): int(n) for i, n in rows} for rows in logs.rows(query)]
 
 
-def closed_open_at(conn: Connection, at_ns: int) -> int:
-    """Ended episodes that were CONFIRMED at ``at_ns`` (start < at <= end)."""
+def estops(logs: Logs, edges: Sequence[tuple[int, int]],
+           only: Sequence[str]) -> list[dict[int, int]]:
+    """Per log, per period i (bounds in ns): activations of the codes ``only`` (the
+    e-stops), counted through the partial index of activations."""
+    found: list[dict[int, int]] = [{} for _ in range(len(logs))]
+    p = logs.periods(edges, "ns")
+    f = stat_facts.c
+    for chunk in _chunks(only):
+        if not chunk:
+            continue
+        query = (
+            select(p.c.i, func.count())
+            .select_from(p.join(stat_facts, and_(
+                f.activation == 1, f.fault_code.in_(chunk), f.at_ns >= p.c.a,
+                f.at_ns < p.c.b)))
+            .group_by(p.c.i)
+        )
+        for counts, rows in zip(found, logs.rows(query), strict=True):
+            for i, n in rows:
+                counts[int(i)] = counts.get(int(i), 0) + int(n)
+    return found
+
+
+def closed_open_at(logs: Logs, at_ns: int) -> list[int]:
+    """Per log: ended episodes that were CONFIRMED at ``at_ns`` (start < at <= end)."""
     query = select(func.count()).select_from(stat_episodes).where(
         stat_episodes.c.start_ns < at_ns, stat_episodes.c.end_ns >= at_ns)
-    return int(conn.execute(query).scalar_one())
+    return [int(rows[0][0]) if rows else 0 for rows in logs.rows(query)]
 
 
 Span = tuple[str, int, int | None]
 """(code, start_ns, end_ns or None while open): what staleness and open time need."""
 
 
-def open_spans(conn: Connection) -> list[Span]:
+def open_spans(logs: Logs) -> list[list[Span]]:
     query = select(stat_episodes.c.fault_code, stat_episodes.c.start_ns,
                    stat_episodes.c.end_ns).where(stat_episodes.c.end_ns.is_(None))
-    return [(code, int(start), None) for code, start, _ in fastpath.fetch_all(conn, query)]
+    return [[(code, int(start), None) for code, start, _ in rows] for rows in logs.rows(query)]
 
 
-def long_spans(conn: Connection, since_ns: int, until_ns: int, min_ns: int) -> list[Span]:
-    """Ended episodes of at least ``min_ns`` that end after ``since_ns`` and start before
-    ``until_ns - min_ns`` (the stale candidates; the partial index holds only long ones)."""
+def long_spans(logs: Logs, since_ns: int, until_ns: int, min_ns: int) -> list[list[Span]]:
+    """Per log: ended episodes of at least ``min_ns`` that end after ``since_ns`` and start
+    before ``until_ns - min_ns`` (the stale candidates; the partial index holds only long
+    ones)."""
     e = stat_episodes.c
     # The length as a literal, so SQLite sees that the partial index's condition holds.
     query = select(e.fault_code, e.start_ns, e.end_ns).where(
         e.end_ns - e.start_ns >= literal_column(str(int(min_ns))), e.end_ns > since_ns,
         e.start_ns < until_ns - min_ns)
-    return [(code, int(start), int(end)) for code, start, end in fastpath.fetch_all(
-        conn, query)]
+    return [[(code, int(start), int(end)) for code, start, end in rows]
+            for rows in logs.rows(query)]
 
 
 def codes(conn: Connection) -> list[str]:
     """Every code the statistics know (globs are matched against these)."""
-    return [row[0] for row in conn.execute(select(stat_codes.c.fault_code))]
+    return codes_of(Logs(conn))[0]
+
+
+def codes_of(logs: Logs) -> list[list[str]]:
+    """Per log: every code its statistics know."""
+    return [[row[0] for row in rows] for rows in logs.rows(select(stat_codes.c.fault_code))]
+
+
+def facts_of(logs: Logs, since_ns: int, until_ns: int) -> list[list[StatFact]]:
+    """Per log: its facts in [since, until) (a partial minute's)."""
+    query = select(stat_facts).where(stat_facts.c.at_ns >= since_ns,
+                                     stat_facts.c.at_ns < until_ns)
+    return [[StatFact(*row) for row in rows] for rows in logs.rows(query)]
+
+
+def goals_of(logs: Logs, since_ns: int, until_ns: int) -> list[list[GoalFact]]:
+    """Per log: its goal outcomes in [since, until) (a partial minute's)."""
+    return [[GoalFact(*row) for row in rows] for rows in logs.rows(_goals(since_ns, until_ns))]
 
 
 def facts(conn: Connection, since_ns: int, until_ns: int,
@@ -329,35 +407,25 @@ def facts(conn: Connection, since_ns: int, until_ns: int,
     return found
 
 
-def activation_times(conn: Connection, since_ns: int, until_ns: int,
-                     only: Sequence[str]) -> list[int]:
-    """When the codes ``only`` had an activation in [since, until) (ns): the e-stops."""
-    window = and_(stat_facts.c.at_ns >= since_ns, stat_facts.c.at_ns < until_ns,
-                  stat_facts.c.activation == 1)
-    found: list[int] = []
-    for chunk in _chunks(only):
-        if chunk:
-            query = select(stat_facts.c.at_ns).where(window,
-                                                     stat_facts.c.fault_code.in_(chunk))
-            found.extend(row[0] for row in conn.execute(query))
-    return found
+def _goals(since_ns: int, until_ns: int) -> Any:
+    return select(stat_goals).where(stat_goals.c.at_ns >= since_ns,
+                                    stat_goals.c.at_ns < until_ns)
 
 
 def goals(conn: Connection, since_ns: int, until_ns: int) -> list[GoalFact]:
     """Goal outcomes in [since, until) (through ix_stat_goals_at)."""
-    query = select(stat_goals).where(stat_goals.c.at_ns >= since_ns,
-                                     stat_goals.c.at_ns < until_ns)
-    return [GoalFact(*row) for row in fastpath.fetch_all_rendered(conn, query)]
+    return [GoalFact(*row) for row in fastpath.fetch_all_rendered(conn,
+                                                                  _goals(since_ns, until_ns))]
 
 
-def edge_episodes(conn: Connection, since_ns: int, until_ns: int) -> list[Episode]:
-    """Episodes that start, or whose ending record lies, in [since, until): the episode edges
-    of a part of a minute (the minute table holds whole minutes)."""
+def edge_episodes(logs: Logs, since_ns: int, until_ns: int) -> list[list[Episode]]:
+    """Per log: episodes that start, or whose ending record lies, in [since, until): the
+    episode edges of a part of a minute (the minute table holds whole minutes)."""
     e = stat_episodes.c
     query = select(stat_episodes).where(or_(
         and_(e.start_ns >= since_ns, e.start_ns < until_ns),
         and_(e.end_ns >= since_ns, e.end_ns < until_ns)))
-    return [Episode(*row) for row in fastpath.fetch_all_rendered(conn, query)]
+    return [[Episode(*row) for row in rows] for rows in logs.rows(query)]
 
 
 def episodes(conn: Connection, since_ns: int, until_ns: int,
