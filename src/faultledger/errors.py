@@ -92,3 +92,9 @@ class InternalError(StoreError):
     """An unexpected failure while writing, turned into an answer (the writer's last resort)."""
 
     reason = Reason.INTERNAL
+
+
+def clipped(error: BaseException, limit: int = 300) -> str:
+    """An unexpected error as one bounded log/answer line: type, message, no traceback."""
+    text = repr(f"{type(error).__name__}: {error}")[1:-1]
+    return text if len(text) <= limit else f"{text[:limit]}…(+{len(text) - limit} chars)"

@@ -153,6 +153,11 @@ class StatsFold:
         self._saved_len = None
         self._saved_tracks = None
 
+    def peek(self) -> StatsOutput:
+        """What was produced since the last ``take``, staged part included, kept: saved
+        within a transaction that may still fail, and taken once it committed."""
+        return self._out
+
     def take(self) -> StatsOutput:
         """Hand over (and forget) what was produced since the last call."""
         out = self._out

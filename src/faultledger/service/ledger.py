@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import re
 import socket
@@ -30,6 +31,7 @@ from faultledger.errors import (
     FaultLedgerError,
     InvalidInputError,
     Reason,
+    clipped,
 )
 from faultledger.service import audit, statistics
 from faultledger.service.arguments import aware_ns, check_limit, record_filter, seq_number
@@ -61,7 +63,6 @@ from faultledger.service.writer import (
     ReclassifyHealed,
     RecordPolicy,
     Writer,
-    clipped,
     identity_mismatch,
 )
 from faultledger.store import event_log, migrate, projections, stat_tables
@@ -208,6 +209,10 @@ class FaultLedger:
         """
         found = self._writer.projector.committed_identity
         if found is None:
+            with contextlib.suppress(FaultLedgerError):
+                self.catch_up()  # its record, whether or not that process saved projections
+                found = self._writer.projector.committed_identity
+        if found is None:
             try:
                 with self._db.reading() as conn:
                     stored = projections.load_identity(conn)
@@ -301,13 +306,19 @@ class FaultLedger:
         return count
 
     # -- reads -----------------------------------------------------------------------------------
+    def _saved(self) -> None:
+        """Before a read of the saved projections or statistics: every record appended so
+        far (by any process) is in them. Writers save projections behind their commits
+        (docs/architecture.md, "Saving the projections")."""
+        self.catch_up()
+        self._writer.save_projections()
+
     def _faults(self) -> list[Fault]:
         return self._writer.projector.committed()
 
     def catch_up(self) -> int:
-        """Apply the records other processes appended since (whoever appended them saved
-        their projections) and return the log's last seq: for readers that must see them
-        now rather than at the next background tick."""
+        """Apply the records other processes appended since and return the log's last seq:
+        for readers that must see them now rather than at the next background tick."""
         with self._db.reading() as conn:
             stored = event_log.head(conn)[0]
         if stored == self.last_seq:
@@ -379,6 +390,7 @@ class FaultLedger:
         query = statistics.StatsQuery(by, since, until, codes, group_by,
                                       calendar or self.calendar, as_of, self.estop_codes,
                                       budget)
+        self._saved()
         return statistics.compute(self._db, query)
 
     def downtimes(self, since: datetime, until: datetime, limit: int | None = None, *,
@@ -394,6 +406,7 @@ class FaultLedger:
         check_limit(limit)
         if since_ns >= until_ns:
             raise InvalidInputError("since must be before until")
+        self._saved()
         with self._db.reading() as conn:
             episodes = stat_tables.episodes(conn, since_ns, until_ns, None)
         found: list[Downtime] = []
@@ -409,6 +422,7 @@ class FaultLedger:
         return found if limit is None else found[:limit]
 
     def transitions(self, code: str | None = None) -> list[Transition]:
+        self._saved()
         with self._db.reading() as conn:
             return projections.load_transitions(conn, code)
 
@@ -435,6 +449,11 @@ class FaultLedger:
         The whole-log check also runs the database's own integrity check (SQLite); a segment
         does not (it reads only its records).
         """
+        if from_seq is None and to_seq is None:
+            # So the check covers this process's latest commits too (a log that cannot be
+            # written is checked as saved).
+            with contextlib.suppress(FaultLedgerError):
+                self._saved()
         return audit.verify(self._db, from_seq, to_seq)
 
     # -- notifications ---------------------------------------------------------------------------
@@ -504,6 +523,7 @@ class FaultLedger:
         while not self._stop.wait(self._tick_interval()):
             try:
                 self.catch_up()
+                self._writer.save_if_due()
                 if self.policy.auto_confirm_after_sec > 0:
                     self._writer.submit(ConfirmOverdue(time.time_ns()))
             except FaultLedgerError as error:

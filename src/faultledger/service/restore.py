@@ -12,8 +12,7 @@ from faultledger.domain.events import LogRecord
 from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Projector, Transition
 from faultledger.domain.statistics import StatsFold
-from faultledger.errors import FaultLedgerError
-from faultledger.service.writer import clipped
+from faultledger.errors import FaultLedgerError, clipped
 from faultledger.store import event_log, projections, stat_tables
 from faultledger.store.database import Database
 
@@ -68,36 +67,44 @@ def stats_of(projector: Projector) -> StatsFold:
     return projector.stats
 
 
+def _saved(conn: Connection) -> tuple[Projector, int]:
+    """A projector holding the saved projections (at their checkpoint), and the seq the
+    saved statistics include: the projector's statistics fold is theirs only when that
+    seq is the checkpoint's."""
+    checkpoint = projections.load_checkpoint(conn)
+    policy = event_log.policy_at(conn, checkpoint.policy_seq)
+    stats_seq = stat_tables.checkpoint_seq(conn)
+    tracks = stat_tables.load_tracks(conn) if stats_seq == checkpoint.seq else None
+    identity, identity_seq = projections.load_identity(conn) or (None, 0)
+    projector = Projector(
+        projections.load_faults(conn),
+        Policy.model_validate(policy.policy) if policy else None,
+        checkpoint.seq,
+        policy_recorded=policy is not None,
+        policy_seq=checkpoint.policy_seq,
+        stats=StatsFold(tracks),
+        identity=identity,
+        identity_seq=identity_seq,
+    )
+    return projector, stats_seq
+
+
 def restore(db: Database) -> tuple[Projector, int, int]:
     """Persisted projections plus a replay of the records after their checkpoint: the
     projector, the log's head seq and how many records were replayed."""
     with db.reading() as conn:
-        checkpoint = projections.load_checkpoint(conn)
-        policy = event_log.policy_at(conn, checkpoint.policy_seq)
-        stats_seq = stat_tables.checkpoint_seq(conn)
-        tracks = stat_tables.load_tracks(conn) if stats_seq == checkpoint.seq else None
-        identity, identity_seq = projections.load_identity(conn) or (None, 0)
-        projector = Projector(
-            projections.load_faults(conn),
-            Policy.model_validate(policy.policy) if policy else None,
-            checkpoint.seq,
-            policy_recorded=policy is not None,
-            policy_seq=checkpoint.policy_seq,
-            stats=StatsFold(tracks),
-            identity=identity,
-            identity_seq=identity_seq,
-        )
+        projector, stats_seq = _saved(conn)
         stored_seq = event_log.head(conn)[0]
-    if tracks is None:
+    saved = projector.seq
+    if stats_seq != saved:
         try:
-            projector.stats = catch_up_statistics(db, checkpoint.seq, stats_seq)
+            projector.stats = catch_up_statistics(db, saved, stats_seq)
         except _Moved:
             return restore(db)
-    if stored_seq < checkpoint.seq:
+    if stored_seq < saved:
         log.warning("the log ends at seq %d but the projections include seq %d: records were "
-                    "deleted; writes are refused (run `faultledger verify`)",
-                    stored_seq, checkpoint.seq)
-    replayed = max(0, stored_seq - checkpoint.seq)
+                    "deleted; writes are refused (run `faultledger verify`)", stored_seq, saved)
+    replayed = max(0, stored_seq - saved)
     if replayed:
         try:
             projector = persist_tail(db, projector)
@@ -122,18 +129,12 @@ def persist_tail(db: Database, projector: Projector) -> Projector:
     Several processes opening one log at once all find the same lagging projections; the
     first to take the write lock saves them, the others (``_Moved``) restore again from what
     it saved, rather than saving the same rows twice."""
-    identified = projector.identity is not None
     try:
         with db.writing() as conn:
             if projections.load_checkpoint(conn).seq != projector.seq:
                 raise _Moved
             projector.stage()
-            found = apply_all(projector, event_log.read(conn, after_seq=projector.seq))
-            projections.save(conn, projector.staged_faults(), found,
-                             projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
-            if not identified and projector.identity is not None:
-                projections.save_identity(conn, projector.identity, projector.identity_seq)
-            stat_tables.save(conn, stats_of(projector).take(), projector.seq)
+            _save_tail(conn, projector)
         projector.commit()
     except FaultLedgerError as error:
         projector.rollback()
@@ -143,6 +144,35 @@ def persist_tail(db: Database, projector: Projector) -> Projector:
             apply_all(projector, event_log.read(conn, after_seq=projector.seq))
         stats_of(projector).take()
     return projector
+
+
+def _save_tail(conn: Connection, projector: Projector) -> None:
+    """Apply the records after ``projector``'s seq (it holds the saved projections, staged)
+    and save what they changed, in the caller's write transaction."""
+    identified = projector.identity is not None
+    found = apply_all(projector, event_log.read(conn, after_seq=projector.seq))
+    projections.save(conn, projector.staged_faults(), found,
+                     projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
+    if not identified and projector.identity is not None:
+        projections.save_identity(conn, projector.identity, projector.identity_seq)
+    stat_tables.save(conn, stats_of(projector).take(), projector.seq)
+
+
+def persist_lagging(conn: Connection) -> None:
+    """In the caller's write transaction, bring the saved projections and statistics up to
+    the log's head from what is saved: for a writer whose own unsaved changes cannot be
+    used because another process saved part of them (service/writer.py, "Saving the
+    projections")."""
+    projector, stats_seq = _saved(conn)
+    if stats_seq == projector.seq:
+        projector.stage()
+        _save_tail(conn, projector)
+        return
+    replayed, transitions = replay(conn)  # statistics saved to another seq: all of it again
+    projections.replace_all(conn, replayed.committed(), transitions,
+                            projections.Checkpoint(*event_log.head(conn), replayed.policy_seq))
+    stat_tables.replace_all(conn, stats_of(replayed).take(), replayed.seq)
+    projections.replace_identity(conn, replayed.identity, replayed.identity_seq)
 
 
 def catch_up_statistics(db: Database, upto: int, stats_seq: int) -> StatsFold:

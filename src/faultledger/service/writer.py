@@ -45,7 +45,9 @@ from faultledger.errors import (
     Reason,
     StoreError,
     WriteConflictError,
+    clipped,
 )
+from faultledger.service import restore
 from faultledger.service.results import ClearResult, ReportResult
 from faultledger.service.telemetry import Telemetry
 from faultledger.store import event_log, projections, stat_tables
@@ -107,8 +109,19 @@ class Exclusive:
     action: Callable[[Connection, Writer], Any]
 
 
+@dataclass(frozen=True, slots=True)
+class SaveProjections:
+    """Save the projections now (before a read of the saved ones)."""
+
+
 Command = (Report | Clear | RecordGoal | ConfirmOverdue | ReclassifyHealed | RecordPolicy
-           | CatchUp | Exclusive)
+           | CatchUp | Exclusive | SaveProjections)
+
+SAVE_EVERY_RECORDS = 1_000
+"""Unsaved records at which a commit also saves the projections (docs/architecture.md,
+"Saving the projections")."""
+SAVE_AFTER_S = 0.5
+"""Age of the oldest unsaved commit at which ``save_if_due`` saves the projections."""
 
 
 def _held_lock() -> threading.Lock:
@@ -230,6 +243,12 @@ class Writer:
         self._head: tuple[int, str] | None = None
         self._reclaim = False
         """Set by "disk full": checkpoint and truncate the WAL before the next commit."""
+        self._saved_seq = projector.seq
+        """How far the saved projections go, as far as this writer knows (restore saved
+        everything it replayed)."""
+        self._unsaved_codes: set[str] = set()
+        self._unsaved_transitions: list[Transition] = []
+        self._unsaved_since: float | None = None
         self.commits = 0
         self.telemetry = Telemetry()
         """Records appended and commit latency of this writer (``GET /metrics``)."""
@@ -317,8 +336,27 @@ class Writer:
         finally:
             self._gathering = False
 
+    def save_projections(self) -> None:
+        """Save the projections if they are behind this writer's commits (before a read of
+        the saved projections or statistics in this process)."""
+        if self._saved_seq != self.projector.committed_seq or self._unsaved_since is not None:
+            self.submit(SaveProjections())
+
+    def save_if_due(self) -> None:
+        """Save the projections if the oldest unsaved commit is SAVE_AFTER_S old (the
+        background tick): they follow the log within about a second."""
+        since = self._unsaved_since
+        if since is not None and time.monotonic() - since >= SAVE_AFTER_S:
+            self.submit(SaveProjections())
+
     def close(self) -> None:
-        """Refuse new commands, let the queued ones commit, release the connection."""
+        """Refuse new commands, let the queued ones commit, save the projections, release
+        the connection."""
+        try:
+            if not self._closed:
+                self.save_projections()
+        except FaultLedgerError as error:  # the log is whole; the next open replays its tail
+            log.warning("projections not saved at close: %s", error)
         with self._mutex:
             self._closed = True
             while self._leading:
@@ -391,6 +429,7 @@ class Writer:
         projector = self.projector
         projector.stage()
         batch = _Batch(projector, time.time_ns(), self.robot_id)
+        saved = False
         try:
             with self._connection.transaction() as conn:
                 if (self._head is None or self._head[0] != projector.seq
@@ -408,22 +447,55 @@ class Writer:
                 head_hash = self._head[1]
                 if batch.records:
                     head_hash = event_log.append(conn, batch.records, head_hash)
-                if batch.records:
-                    projections.save(conn, projector.staged_faults(), batch.transitions,
-                                     projections.Checkpoint(projector.seq, head_hash,
-                                                            projector.policy_seq))
-                    if projector.stats is not None:
-                        stat_tables.save(conn, projector.stats.take(), projector.seq)
-                    if (projector.identity is not None
-                            and projector.identity_seq >= batch.records[0].seq):
-                        projections.save_identity(conn, projector.identity,
-                                                  projector.identity_seq)
+                exclusive = any(isinstance(p.command, Exclusive) for p in group)
+                if not exclusive and (
+                        projector.seq - self._saved_seq >= SAVE_EVERY_RECORDS
+                        or any(isinstance(p.command, SaveProjections) for p in group)):
+                    self._save(conn, batch, head_hash)
+                    saved = True
         except BaseException:
             projector.rollback()
             raise
+        changed = [fault.fault_code for fault in projector.staged_faults()]
         projector.commit()
         self._head = (projector.seq, head_hash)
+        if saved or exclusive:  # (an exclusive action saved a whole replay: rebuild)
+            self._unsaved_codes.clear()
+            self._unsaved_transitions.clear()
+            self._unsaved_since = None
+            if self.projector.stats is not None:
+                self.projector.stats.take()
+            self._saved_seq = self.projector.committed_seq
+        elif projector.seq != self._saved_seq:
+            self._unsaved_codes.update(changed)
+            self._unsaved_transitions.extend(batch.transitions)
+            if self._unsaved_since is None:
+                self._unsaved_since = time.monotonic()
         return batch
+
+    def _save(self, conn: Connection, batch: _Batch, head_hash: str) -> None:
+        """Save what the commits since the last save changed (this group's included), in
+        this group's transaction: the faults they touched, their transitions, statistics
+        and identity, and the checkpoint at this group's last record.
+
+        The changes are this writer's own record of what it applied since the saved
+        checkpoint, so they are used only while the saved checkpoint is still where this
+        writer left it. Where another process saved since (or a failed save at open left
+        it behind), they overlap what is saved: then the projections are brought up to
+        the head from what is saved instead (``restore.persist_lagging``).
+        """
+        projector = self.projector
+        if projections.load_checkpoint(conn).seq != self._saved_seq:
+            restore.persist_lagging(conn)
+            return
+        codes = self._unsaved_codes.union(f.fault_code for f in projector.staged_faults())
+        changed = [fault for fault in map(projector.get, sorted(codes)) if fault is not None]
+        projections.save(conn, changed, [*self._unsaved_transitions, *batch.transitions],
+                         projections.Checkpoint(projector.seq, head_hash, projector.policy_seq))
+        if projector.stats is not None:
+            stat_tables.save(conn, projector.stats.peek(), projector.seq)
+        if projector.identity is not None and projector.identity_seq > self._saved_seq:
+            projections.save_identity(conn, projector.identity, projector.identity_seq)
 
     def _check_identity(self) -> None:
         """Refuse to write into another robot's log (identified by another process since
@@ -445,7 +517,8 @@ class Writer:
             pending.done = True
 
     def _catch_up(self, conn: Connection, stored_seq: int, batch: _Batch) -> None:
-        """Apply records another process appended; it saved their projections already.
+        """Apply records another process appended (their effects join this writer's unsaved
+        changes: that process may not have saved them yet).
 
         Their announcements go out with this group's, after its commit, so subscribers (the
         ROS events topic, HTTP streams) also see what other processes wrote, in seq order.
@@ -460,11 +533,11 @@ class Writer:
             )
         for record in event_log.read(conn, after_seq=projector.seq):
             effect = projector.apply(record)
+            if effect.transition is not None:
+                batch.transitions.append(effect.transition)
             if effect.notification is not None and effect.fault is not None:
                 batch.notifications.append(Notification(
                     effect.notification, effect.fault, record.recorded_at_ns, record.seq))
-        if projector.stats is not None:
-            projector.stats.take()  # the other process saved these too
 
     def _ensure_policy(self, batch: _Batch) -> None:
         """Record the effective policy before the first record that depends on it."""
@@ -505,7 +578,7 @@ class Writer:
             batch.identify()  # a serving writer identifies the log when it starts
             self._ensure_policy(batch)
             return projector.policy
-        if isinstance(command, CatchUp):
+        if isinstance(command, CatchUp | SaveProjections):
             return projector.seq
         return command.action(conn, self)
 
@@ -544,12 +617,6 @@ def identity_mismatch(url: str, recorded: LedgerIdentity, wanted: str) -> Identi
         f"another robot's log, give {wanted!r} its own database; if it is this robot's, set "
         f"robot_id to {recorded.robot_id!r} (a log keeps the robot_id it recorded first). "
         "Reading a copied log (verify, history) needs no robot_id: leave it unset")
-
-
-def clipped(error: BaseException, limit: int = 300) -> str:
-    """An unexpected error as one bounded log/answer line: type, message, no traceback."""
-    text = repr(f"{type(error).__name__}: {error}")[1:-1]
-    return text if len(text) <= limit else f"{text[:limit]}…(+{len(text) - limit} chars)"
 
 
 def _split_exclusive(batch: list[_Pending]) -> list[list[_Pending]]:
