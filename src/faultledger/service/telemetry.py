@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import bisect
 import threading
-from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -31,23 +30,22 @@ class Snapshot:
 class Telemetry:
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._records: Counter[str] = Counter()
-        self._reports: Counter[str] = Counter()
+        self._records: dict[str, int] = {}
+        self._reports: dict[str, int] = {}
         self._commits = 0
         self._seconds = 0.0
         self._buckets = [0] * (len(COMMIT_BUCKETS) + 1)
 
     def committed(self, records: Sequence[LogRecord], seconds: float) -> None:
-        kinds: Counter[str] = Counter()
-        types: Counter[str] = Counter()
-        for record in records:
-            event = record.event
-            kinds[event.kind] += 1
-            if isinstance(event, FaultReported):
-                types[event.event_type.name] += 1
-        with self._lock:
-            self._records.update(kinds)
-            self._reports.update(types)
+        with self._lock:  # plain dict counts: this runs once per commit on the hot path
+            kinds, types = self._records, self._reports
+            for record in records:
+                event = record.event
+                kind = event.kind
+                kinds[kind] = kinds.get(kind, 0) + 1
+                if isinstance(event, FaultReported):
+                    name = event.event_type.name
+                    types[name] = types.get(name, 0) + 1
             self._commits += 1
             self._seconds += seconds
             self._buckets[bisect.bisect_left(COMMIT_BUCKETS, seconds)] += 1
