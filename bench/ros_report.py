@@ -4,6 +4,11 @@ Both servers use the same request type, QoS, callback group and executor; the cl
 separate processes with the same call pattern (see _ros_client.py). Runs alternate echo and
 faultledger so that this VM's drift hits both alike; the figures are the medians of the rounds.
 
+The physical limit of one sequential client (issue 20) is measured in the same run: an echo
+round trip plus one raw durable commit (sqlite3, WAL, synchronous=FULL, one row per commit, as
+bench/ingest.py's baseline (a)), i.e. 1 / (1 / echo rate + median commit time). Targets: one
+client ≥ 0.8× that limit, four clients ≥ 0.8× the echo service.
+
 Run it in a private network namespace: ``scripts/in-netns .venv/bin/python bench/ros_report.py``.
 """
 
@@ -19,7 +24,18 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from _common import BENCH_DIR, header, percentile, ratio, remove_db, scratch_dir, url_for, verdict
+from _common import (
+    BENCH_DIR,
+    header,
+    percentile,
+    plan,
+    ratio,
+    remove_db,
+    scratch_dir,
+    url_for,
+    verdict,
+)
+from ingest import run_raw
 
 TARGET_RATIO = 0.8
 TARGET_SEQUENTIAL = 1_000.0
@@ -108,6 +124,15 @@ def main() -> None:
     print(f"   {args.rounds} alternating rounds; {args.calls} sequential calls per client "
           f"process; FAILED/PASSED alternating over {args.codes} codes per client")
     with scratch_dir("ros-") as scratch:
+        commits = []
+        for round_ in range(args.rounds):
+            raw_db = scratch / f"raw-{round_}.db"
+            commits.append(statistics.median(run_raw(plan(args.calls, args.codes),
+                                                     raw_db).latencies))
+            remove_db(raw_db)
+        commit_s = statistics.median(commits)
+        print(f"   raw durable commit (sqlite3, WAL, synchronous=FULL, one row): median "
+              f"{commit_s * 1e3:.3f} ms", flush=True)
         for clients in (1, 4):
             runs: dict[str, list[Run]] = {"echo": [], "faultledger": []}
             for _ in range(args.rounds):
@@ -123,6 +148,11 @@ def main() -> None:
             print(f"   ratio {share:.2f}x echo (target >= {TARGET_RATIO}x: "
                   f"{verdict(share >= TARGET_RATIO)}); {ours.rate:,.0f}/s "
                   f"(target >= {target:,.0f}/s: {verdict(ours.rate >= target)})")
+            if clients == 1:
+                limit = 1 / (1 / echo.rate + commit_s)
+                print(f"   physical limit (echo round trip + one raw durable commit): "
+                      f"{limit:,.0f}/s; ratio {ratio(ours.rate, limit):.2f}x (target >= "
+                      f"{TARGET_RATIO}x: {verdict(ratio(ours.rate, limit) >= TARGET_RATIO)})")
             print(f"   rounds: echo {[round(r.rate) for r in runs['echo']]}, "
                   f"faultledger {[round(r.rate) for r in runs['faultledger']]}", flush=True)
 

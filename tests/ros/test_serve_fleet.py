@@ -5,6 +5,7 @@ network namespace) within about a second; SIGTERM stops the manager and its push
 
 from __future__ import annotations
 
+import json
 import sqlite3
 import time
 from collections.abc import Iterator
@@ -27,9 +28,11 @@ def central(tmp_path: Path) -> Iterator[Central]:
 
 
 def ledger_id_of(db: Path) -> str:
+    """From the log's own identity record (the projections are saved behind the commits)."""
     with sqlite3.connect(db) as conn:
-        (ledger_id,) = conn.execute("SELECT ledger_id FROM ledger_identity").fetchone()
-    return str(ledger_id)
+        (payload,) = conn.execute("SELECT payload FROM events WHERE kind = 'ledger_identified' "
+                                  "ORDER BY seq LIMIT 1").fetchone()
+    return str(json.loads(payload)["ledger_id"])
 
 
 def test_serve_pushes_each_report_to_the_central_within_a_second(

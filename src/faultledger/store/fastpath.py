@@ -77,11 +77,44 @@ def execute_many(conn: Connection, statement: ClauseElement,
         rules_for(conn.dialect.name).upsert_rows(conn, target, *_columns_and_tuples(rows),
                                                  prepared.sql)
         return
+    params = prepared.params_many(rows)
     cursor = _cursor(conn)
     try:
-        cursor.executemany(prepared.sql, prepared.params_many(rows))
+        if (conn.dialect.name == "sqlite" and len(rows) > 1 and prepared.order is not None
+                and isinstance(statement, Insert)):
+            _insert_together(cursor, prepared.sql, params)
+        else:
+            cursor.executemany(prepared.sql, params)
     finally:
         cursor.close()
+
+
+MAX_ROWS_PER_STATEMENT = 500
+"""Rows one multi-row INSERT writes on SQLite (columns × rows stays far below SQLite's
+32,766 variables)."""
+
+
+def _insert_together(cursor: Any, sql: str, params: Sequence[Any]) -> None:
+    """SQLite: the rows of an INSERT (or upsert) as multi-row statements. ``executemany``
+    steps once per row and Python's sqlite3 lets go of the GIL at every step; while another
+    thread computes (a long statistics query), getting it back takes up to the switch
+    interval each time, so a save of a few hundred rows took seconds (tests/ros/
+    test_read_pool.py). One statement per 500 rows takes it back once."""
+    for start in range(0, len(params), MAX_ROWS_PER_STATEMENT):
+        chunk = params[start:start + MAX_ROWS_PER_STATEMENT]
+        values = [value for row in chunk for value in row]
+        cursor.execute(_multi_row(sql, len(chunk)), values)
+
+
+@lru_cache(maxsize=512)
+def _multi_row(sql: str, rows: int) -> str:
+    """``INSERT ... VALUES (?, ?) [ON CONFLICT ...]`` with the VALUES group repeated."""
+    head, found, rest = sql.partition(" VALUES (")
+    group, closed, tail = rest.partition(")")
+    if not found or not closed or group.replace("?", "").replace(",", "").strip():
+        raise ValueError(f"not a plain positional INSERT: {sql[:80]}")
+    one = f"({group})"
+    return f"{head} VALUES {','.join([one] * rows)}{tail}"
 
 
 def _columns_and_tuples(rows: Sequence[Mapping[str, Any]]
