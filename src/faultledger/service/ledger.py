@@ -41,9 +41,8 @@ from faultledger.service.restore import (
     DAMAGED,
     UnreadableRecord,
     apply_all,
-    replay,
     restore,
-    stats_of,
+    save_replay,
 )
 from faultledger.service.results import (
     ClearResult,
@@ -293,12 +292,7 @@ class FaultLedger:
         """Drop the projections and replay the whole log; returns the records replayed."""
 
         def action(conn: Connection, writer: Writer) -> int:
-            projector, replayed = replay(conn)
-            projections.replace_all(conn, projector.committed(), replayed,
-                                    projections.Checkpoint(*event_log.head(conn),
-                                                           projector.policy_seq))
-            stat_tables.replace_all(conn, stats_of(projector).take(), projector.seq)
-            projections.replace_identity(conn, projector.identity, projector.identity_seq)
+            projector = save_replay(conn)
             writer.projector = projector
             return projector.seq
 

@@ -168,11 +168,18 @@ def persist_lagging(conn: Connection) -> None:
         projector.stage()
         _save_tail(conn, projector)
         return
-    replayed, transitions = replay(conn)  # statistics saved to another seq: all of it again
+    save_replay(conn)  # statistics saved to another seq: all of it again
+
+
+def save_replay(conn: Connection) -> Projector:
+    """In the caller's write transaction, replace the saved projections, statistics and
+    identity with a full replay of the log (``rebuild``); returns the replay's projector."""
+    replayed, transitions = replay(conn)
     projections.replace_all(conn, replayed.committed(), transitions,
                             projections.Checkpoint(*event_log.head(conn), replayed.policy_seq))
     stat_tables.replace_all(conn, stats_of(replayed).take(), replayed.seq)
     projections.replace_identity(conn, replayed.identity, replayed.identity_seq)
+    return replayed
 
 
 def catch_up_statistics(db: Database, upto: int, stats_seq: int) -> StatsFold:

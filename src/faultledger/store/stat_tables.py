@@ -384,9 +384,7 @@ def codes_of(logs: Logs) -> list[list[str]]:
 
 def facts_of(logs: Logs, since_ns: int, until_ns: int) -> list[list[StatFact]]:
     """Per log: its facts in [since, until) (a partial minute's)."""
-    query = select(stat_facts).where(stat_facts.c.at_ns >= since_ns,
-                                     stat_facts.c.at_ns < until_ns)
-    return [[StatFact(*row) for row in rows] for rows in logs.rows(query)]
+    return [[StatFact(*row) for row in rows] for rows in logs.rows(_facts(since_ns, until_ns))]
 
 
 def goals_of(logs: Logs, since_ns: int, until_ns: int) -> list[list[GoalFact]]:
@@ -397,14 +395,18 @@ def goals_of(logs: Logs, since_ns: int, until_ns: int) -> list[list[GoalFact]]:
 def facts(conn: Connection, since_ns: int, until_ns: int,
           only: Sequence[str] | None) -> list[StatFact]:
     """Facts in [since, until), of the codes ``only`` (None: all)."""
-    window = and_(stat_facts.c.at_ns >= since_ns, stat_facts.c.at_ns < until_ns)
     found: list[StatFact] = []
     for chunk in _chunks(only):
-        query = select(stat_facts).where(window)
+        query = _facts(since_ns, until_ns)
         if chunk is not None:
             query = query.where(stat_facts.c.fault_code.in_(chunk))
         found.extend(StatFact(*row) for row in fastpath.fetch_all_rendered(conn, query))
     return found
+
+
+def _facts(since_ns: int, until_ns: int) -> Any:
+    return select(stat_facts).where(stat_facts.c.at_ns >= since_ns,
+                                    stat_facts.c.at_ns < until_ns)
 
 
 def _goals(since_ns: int, until_ns: int) -> Any:
