@@ -9,7 +9,9 @@ import hashlib
 from hypothesis import given
 from hypothesis import strategies as st
 
-from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash
+from faultledger.domain.events import FaultCleared, FaultReported
+from faultledger.domain.integrity import GENESIS_HASH, canonical_json, payload_json, record_hash
+from faultledger.domain.types import EventType
 
 TEXT = st.text(st.characters(exclude_categories=["Cs"]), max_size=40)  # any UTF-8 text
 NUMBER = st.integers(min_value=0, max_value=2**63 - 1)
@@ -41,3 +43,20 @@ def test_a_known_record_keeps_its_hash() -> None:
     assert record_hash(GENESIS_HASH, 1, "e-1", "fault_reported", 'MOTOR_"HOT"\n\t', None,
                        '{"a":"ü"}', 10, 20, 1) == (
         "365ecde7bbe2c65e47b6295162dc03207b4478fc71653466078bc386d736c9ad")
+
+
+@given(code=TEXT, kind=st.sampled_from(EventType), severity=st.integers(0, 3),
+       description=TEXT, source=TEXT)
+def test_a_reports_payload_is_the_canonical_json_of_its_payload(
+        code: str, kind: EventType, severity: int, description: str, source: str) -> None:
+    """``payload_json`` writes a fault report's payload out by hand (the ingest path); it is
+    the encoder's canonical form of ``payload()``, byte for byte."""
+    event = FaultReported(code, kind, severity, description, source)
+    assert payload_json(event) == canonical_json(event.payload())
+
+
+def test_other_records_payloads_go_through_the_encoder() -> None:
+    cleared = FaultCleared('MOTOR_"HOT"', "operator\n", "ü")
+    assert payload_json(cleared) == canonical_json(cleared.payload())
+    assert payload_json(cleared) == '{"actor":"operator\\n","fault_code":"MOTOR_\\"HOT\\"",' \
+        '"reason":"ü"}'

@@ -9,6 +9,7 @@ import uuid
 from faultledger.domain import validation
 from faultledger.domain.clock import to_ns
 from faultledger.domain.events import FaultReported, GoalOutcome, goal_event_id
+from faultledger.service.event_ids import new_event_id
 from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
 from faultledger.service.results import ReportResult
 from faultledger.service.writer import RecordGoal, Report
@@ -38,7 +39,7 @@ def report_command(request: ReportRequest) -> Report | ReportResult:
     occurred_ns = time.time_ns() if request.at is None else to_ns(request.at)
     event = FaultReported(request.fault_code, kind, request.severity, request.description,
                           request.source_id)
-    return Report(event, occurred_ns, event_id or str(uuid.uuid4()), event_id is not None)
+    return Report(event, occurred_ns, event_id or new_event_id(), event_id is not None)
 
 
 def goal_command(request: GoalOutcomeRequest) -> RecordGoal | ReportResult:

@@ -230,8 +230,15 @@ class FaultLedger:
                description: str = "", source_id: str = "", at: datetime | None = None,
                event_id: str | None = None) -> ReportResult:
         """Record one FAILED/PASSED report; returns once it is durable (or rejected)."""
-        return self.report_many([ReportRequest(fault_code, event_type, severity, description,
-                                               source_id, at, event_id)])[0]
+        command = report_command(ReportRequest(fault_code, event_type, severity, description,
+                                               source_id, at, event_id))
+        if isinstance(command, ReportResult):
+            return command
+        try:
+            result: ReportResult = self._writer.submit(command)
+        except FaultLedgerError as error:
+            return ReportResult(False, str(error), reason=error.reason)
+        return result
 
     def report_many(self, requests: Sequence[ReportRequest]) -> list[ReportResult]:
         """Record several reports in order, sharing commits; one result per request.

@@ -48,6 +48,7 @@ from faultledger.errors import (
     clipped,
 )
 from faultledger.service import restore
+from faultledger.service.event_ids import new_event_id
 from faultledger.service.results import ClearResult, ReportResult
 from faultledger.service.telemetry import Telemetry
 from faultledger.store import event_log, projections, stat_tables
@@ -179,7 +180,7 @@ class _Batch:
     def _append(self, event: DomainEvent, occurred_ns: int, event_id: str | None = None) -> int:
         record = LogRecord(
             seq=self.projector.seq + 1,
-            event_id=event_id or str(uuid.uuid4()),
+            event_id=event_id or new_event_id(),
             event=event,
             occurred_at_ns=occurred_ns,
             recorded_at_ns=self.recorded_ns,

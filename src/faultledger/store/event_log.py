@@ -16,18 +16,23 @@ from faultledger.domain.events import (
     PolicyChanged,
     UnknownRecordError,
     decode,
+    fault_code_of,
+    source_of,
 )
 from faultledger.domain.fleet import PushedRecord
-from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_hash, walk_chain
+from faultledger.domain.integrity import (
+    GENESIS_HASH,
+    payload_json,
+    record_hash,
+    walk_chain,
+)
 from faultledger.store import fastpath
-from faultledger.store.dialects import rules_for
 from faultledger.store.schema import events
 
 READ_CHUNK = 5_000
 
 
 _HEAD = select(events.c.seq, events.c.hash).order_by(events.c.seq.desc()).limit(1)
-_INSERT = events.insert()
 
 
 def head(conn: Connection) -> tuple[int, str]:
@@ -45,38 +50,27 @@ def existing_event_ids(conn: Connection, event_ids: Sequence[str]) -> set[str]:
 
 def append(conn: Connection, records: Sequence[LogRecord], prev_hash: str) -> str:
     """Insert records (seq already assigned, gap-free) chaining their hashes; returns the last."""
-    rows: list[dict[str, Any]] = []
-    for record in records:
-        payload_json = canonical_json(record.payload)
-        prev_hash = record_hash(
-            prev_hash, record.seq, record.event_id, record.kind, record.fault_code,
-            record.source_id, payload_json, record.occurred_at_ns, record.recorded_at_ns,
-            record.schema_version,
-        )
-        rows.append({
-            "seq": record.seq,
-            "event_id": record.event_id,
-            "kind": record.kind,
-            "fault_code": record.fault_code,
-            "source_id": record.source_id,
-            "payload": payload_json,
-            "occurred_at_ns": record.occurred_at_ns,
-            "recorded_at_ns": record.recorded_at_ns,
-            "schema_version": record.schema_version,
-            "hash": prev_hash,
-        })
-    fastpath.execute_many(conn, _INSERT, rows)
+    rows: list[tuple[Any, ...]] = []
+    for seq, event_id, event, occurred, recorded, version, _ in records:
+        payload = payload_json(event)
+        code = fault_code_of(event)
+        source = source_of(event)
+        prev_hash = record_hash(prev_hash, seq, event_id, event.kind, code, source, payload,
+                                occurred, recorded, version)
+        rows.append((seq, event_id, event.kind, code, source, payload, occurred, recorded,
+                     version, prev_hash))
+    fastpath.insert_tuples(conn, events, _COLUMNS, rows)
     return prev_hash
 
 
-_VERBATIM_COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "payload",
-                     "occurred_at_ns", "recorded_at_ns", "schema_version", "hash")
+_COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "payload",
+            "occurred_at_ns", "recorded_at_ns", "schema_version", "hash")
 
 
 def append_verbatim(conn: Connection, records: Sequence[PushedRecord]) -> None:
     """Insert records exactly as another log stored them (a fleet central's copy of a robot
     log; the caller checked their hashes and that they continue this log)."""
-    rules_for(conn.dialect.name).insert_rows(conn, events, _VERBATIM_COLUMNS, [
+    fastpath.insert_tuples(conn, events, _COLUMNS, [
         (r.seq, r.event_id, r.kind, r.fault_code, r.source_id, r.payload, r.occurred_at_ns,
          r.recorded_at_ns, r.schema_version, r.hash) for r in records])
 

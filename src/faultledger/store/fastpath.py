@@ -16,7 +16,7 @@ from functools import lru_cache
 from operator import itemgetter
 from typing import Any
 
-from sqlalchemy import Connection
+from sqlalchemy import Connection, Table
 from sqlalchemy.engine import Dialect
 from sqlalchemy.sql import ClauseElement
 from sqlalchemy.sql.dml import Insert
@@ -87,6 +87,35 @@ def execute_many(conn: Connection, statement: ClauseElement,
             cursor.executemany(prepared.sql, params)
     finally:
         cursor.close()
+
+
+def insert_tuples(conn: Connection, table: Table, columns: tuple[str, ...],
+                  rows: Sequence[Sequence[Any]]) -> None:
+    """Rows of plain values (int, str, None) into ``table`` in the caller's transaction: on
+    SQLite one statement per row or per 500 rows (``_insert_together``), elsewhere the
+    dialect's bulk path (PostgreSQL: COPY). The ingest path's append: no compiled statement
+    to look up and no dict per row."""
+    if not rows:
+        return
+    if conn.dialect.name != "sqlite":
+        rules_for(conn.dialect.name).insert_rows(conn, table, columns, rows)
+        return
+    sql = _insert_sql(table.name, columns)
+    driver: Any = conn.connection.driver_connection
+    if len(rows) == 1:
+        driver.execute(sql, rows[0])
+        return
+    cursor = driver.cursor()
+    try:
+        _insert_together(cursor, sql, rows)
+    finally:
+        cursor.close()
+
+
+@lru_cache(maxsize=64)
+def _insert_sql(table: str, columns: tuple[str, ...]) -> str:
+    return (f"INSERT INTO {table} ({', '.join(columns)}) "
+            f"VALUES ({', '.join('?' for _ in columns)})")
 
 
 MAX_ROWS_PER_STATEMENT = 500
