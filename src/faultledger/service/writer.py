@@ -237,6 +237,8 @@ class Writer:
         self._idle = threading.Condition(self._mutex)
         self._leading = False
         self._gathering = False
+        self._gather_target = 0
+        """Queued commands at which the gathering leader is woken."""
         self._callers = 0
         self._leader: int | None = None
         self._closed = False
@@ -274,8 +276,8 @@ class Writer:
                 raise LedgerClosedError("the ledger is closed")
             self._queue.extend(pendings)
             self._callers += 1
-            if self._gathering:
-                self._arrived.notify()
+            if self._gathering and len(self._queue) >= self._gather_target:
+                self._arrived.notify()  # once per group: each wake-up costs the leader a switch
             follow = self._leading
             self._leading = True
         if follow:
@@ -328,6 +330,7 @@ class Writer:
             return
         deadline = time.monotonic() + GATHER_WAIT_S
         self._gathering = True
+        self._gather_target = target
         try:
             while len(self._queue) < target:
                 remaining = deadline - time.monotonic()
