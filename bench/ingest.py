@@ -10,6 +10,7 @@ import sqlite3
 import statistics
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from dataclasses import dataclass
@@ -211,6 +212,32 @@ def run_eventsourcing(work: Plan, workdir: Path) -> tuple[Run, dict[str, Any]]:
     return run, out
 
 
+# -- the cost of a thread hand-off ---------------------------------------------------------------
+def thread_handoff(rounds: int = 5_000) -> tuple[float, float]:
+    """(wall, CPU) seconds of one hand-off between two threads: a lock released to a thread
+    waiting on it, which then runs (half a ping-pong). Each report of several synchronous
+    callers pays at least two: its caller sleeps until the commit is durable, and once woken
+    waits for the interpreter lock."""
+    ping, pong = threading.Lock(), threading.Lock()
+    ping.acquire()
+    pong.acquire()
+
+    def other() -> None:
+        for _ in range(rounds):
+            ping.acquire()
+            pong.release()
+
+    thread = threading.Thread(target=other, daemon=True)
+    thread.start()
+    cpu0, start = time.process_time(), time.perf_counter()
+    for _ in range(rounds):
+        ping.release()
+        pong.acquire()
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu0
+    thread.join()
+    return wall / rounds / 2, cpu / rounds / 2
+
+
 # -- main ----------------------------------------------------------------------------------------
 def show(run: Run) -> None:
     extra = ""
@@ -283,6 +310,14 @@ def main() -> None:
     print(f"   {'':<11}bound if a cycle cost only the fsync: {args.threads} / {fsync_ms:.2f} ms = "
           f"{args.threads / fsync_ms * 1e3:,.0f} reports/s; the rest of the cycle is Python CPU "
           f"({many.cpu_seconds / many.reports * 1e3:.3f} ms CPU per report on 2 cores)")
+    handoff_wall, handoff_cpu = thread_handoff()
+    per_commit = many.records / many.commits
+    floor_us = (2 * handoff_cpu + raw.cpu_seconds / raw.reports / per_commit) * 1e6
+    print(f"   thread hand-off on this machine: {handoff_wall * 1e6:.1f} µs wall, "
+          f"{handoff_cpu * 1e6:.1f} µs CPU (half a ping-pong of two threads)")
+    print(f"   {'':<11}CPU floor per report with {args.threads} synchronous callers before any "
+          f"work of faultledger: 2 hand-offs + the raw commit's CPU / {per_commit:.1f} records = "
+          f"{floor_us:.0f} µs")
     print()
     cpu_us = many.cpu_seconds / many.reports * 1e6
     checks = [  # issue 20's targets

@@ -435,10 +435,11 @@ class Writer:
         batch = _Batch(projector, time.time_ns(), self.robot_id)
         saved = False
         try:
+            kinds = {type(p.command) for p in group}
+            exclusive = Exclusive in kinds
             with self._connection.transaction() as conn:
                 if (self._head is None or self._head[0] != projector.seq
-                        or self._connection.others_committed(conn)
-                        or any(isinstance(p.command, CatchUp) for p in group)):
+                        or self._connection.others_committed(conn) or CatchUp in kinds):
                     self._head = event_log.head(conn)
                     self._catch_up(conn, self._head[0], batch)
                 self._check_identity()
@@ -451,10 +452,8 @@ class Writer:
                 head_hash = self._head[1]
                 if batch.records:
                     head_hash = event_log.append(conn, batch.records, head_hash)
-                exclusive = any(isinstance(p.command, Exclusive) for p in group)
-                if not exclusive and (
-                        projector.seq - self._saved_seq >= SAVE_EVERY_RECORDS
-                        or any(isinstance(p.command, SaveProjections) for p in group)):
+                if not exclusive and (projector.seq - self._saved_seq >= SAVE_EVERY_RECORDS
+                                      or SaveProjections in kinds):
                     self._save(conn, batch, head_hash)
                     saved = True
         except BaseException:
