@@ -20,8 +20,12 @@ from _common import (
     verdict,
 )
 from faultledger import FaultLedger, Policy
+from faultledger.store.schema import stat_facts
 
-TARGET_EVENTS_PER_S = 50_000
+FACT_INDEXES = stat_facts.indexes
+
+TARGET_EVENTS_PER_S = 100_000
+TARGET_RATIO = 0.6
 
 
 def count_events(db: Path) -> int:
@@ -83,6 +87,33 @@ def payload_column(db: Path) -> int:
     return names.index("payload")
 
 
+def facts_write(db: Path, into: Path) -> tuple[int, float]:
+    """What any rebuild that keeps the statistics writes at least: the statistics facts the
+    rebuild of ``db`` wrote (one per report), inserted with raw sqlite3 into an empty table of
+    the same schema and indexes in a new file, in one transaction (WAL, synchronous=FULL)."""
+    source = sqlite3.connect(db)
+    ddl = [sql for (sql,) in source.execute(
+        "SELECT sql FROM sqlite_master WHERE tbl_name = 'stat_facts' AND sql IS NOT NULL "
+        "ORDER BY type DESC")]  # the table, then its indexes
+    rows = source.execute("SELECT * FROM stat_facts").fetchall()
+    source.close()
+    remove_db(into)
+    conn = sqlite3.connect(into, isolation_level=None)
+    conn.execute("PRAGMA journal_mode = WAL")
+    conn.execute("PRAGMA synchronous = FULL")
+    for sql in ddl:
+        conn.execute(sql)
+    marks = ", ".join("?" for _ in rows[0]) if rows else ""
+    start = time.perf_counter()
+    conn.execute("BEGIN IMMEDIATE")
+    conn.executemany(f"INSERT INTO stat_facts VALUES ({marks})", rows)
+    conn.execute("COMMIT")
+    seconds = time.perf_counter() - start
+    conn.close()
+    remove_db(into)
+    return len(rows), seconds
+
+
 def time_rebuild(db: Path) -> tuple[int, float]:
     ledger = FaultLedger.open(url_for(db))  # no policy: opening writes nothing
     try:
@@ -105,8 +136,16 @@ def measure(db: Path) -> None:
           f"({base_n:,} rows in {base_s:.2f} s)")
     print(f"   FaultLedger.rebuild()                       {rate:>12,.0f} events/s "
           f"({replayed:,} records in {seconds:.2f} s)")
+    facts, facts_s = facts_write(db, db.with_name(db.name + ".facts"))
+    print(f"   raw sqlite3 insert of its {facts:,} statistics facts "
+          f"{facts / facts_s:>8,.0f} rows/s ({facts_s:.2f} s; one fact per report, "
+          f"{len(FACT_INDEXES)} indexes)")
+    ceiling = base_s / (base_s + facts_s)
+    print(f"   a rebuild that only read, decoded and wrote the facts: at most "
+          f"{ceiling:.2f}x the baseline")
     print()
-    print(f"   rebuild vs baseline                          {ratio(rate, base_rate):>10.2f}x")
+    print(f"   rebuild vs baseline                          {ratio(rate, base_rate):>10.2f}x   "
+          f"target >= {TARGET_RATIO}x  {verdict(rate / base_rate >= TARGET_RATIO)}")
     print(f"   rebuild absolute (events/s)                  {rate:>10,.0f}   target >= "
           f"{TARGET_EVENTS_PER_S:,}  {verdict(rate >= TARGET_EVENTS_PER_S)}")
 
