@@ -318,6 +318,10 @@ def main() -> None:
     print(f"   {'':<11}CPU floor per report with {args.threads} synchronous callers before any "
           f"work of faultledger: 2 hand-offs + the raw commit's CPU / {per_commit:.1f} records = "
           f"{floor_us:.0f} µs")
+    ceiling = args.threads / (fsync_ms / 1e3 + 2 * args.threads * handoff_wall)
+    print(f"   {'':<11}rate ceiling before any work of faultledger: {args.threads} reports per "
+          f"(one raw commit + 2 x {args.threads} hand-offs, serialized by the interpreter lock)"
+          f" = {ceiling:,.0f} reports/s")
     print()
     cpu_us = many.cpu_seconds / many.reports * 1e6
     checks = [  # issue 20's targets

@@ -1,14 +1,21 @@
-"""Replay speed of FaultLedger.rebuild over a large log vs a bare sqlite3 read + json.loads."""
+"""Replay speed of FaultLedger.rebuild over a large log vs a bare sqlite3 read + json.loads.
+
+``--postgresql`` also copies the log into a PostgreSQL database (a server started here, as the
+tests do: tests/pg_server.py) and measures the rebuild there against a bare psycopg read +
+json.loads of the same rows.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
 import sqlite3
+import sys
 import time
 from pathlib import Path
 
 from _common import (
+    ROOT,
     SCRATCH,
     header,
     plan,
@@ -21,6 +28,9 @@ from _common import (
 )
 from faultledger import FaultLedger, Policy
 from faultledger.store.schema import stat_facts
+
+sys.path.insert(0, str(ROOT))
+from tests import pg_server  # the tests' server helper
 
 FACT_INDEXES = stat_facts.indexes
 
@@ -114,8 +124,8 @@ def facts_write(db: Path, into: Path) -> tuple[int, float]:
     return len(rows), seconds
 
 
-def time_rebuild(db: Path) -> tuple[int, float]:
-    ledger = FaultLedger.open(url_for(db))  # no policy: opening writes nothing
+def time_rebuild(url: str) -> tuple[int, float]:
+    ledger = FaultLedger.open(url)  # no policy: opening writes nothing
     try:
         start = time.perf_counter()
         replayed = ledger.rebuild()
@@ -129,7 +139,7 @@ def measure(db: Path) -> None:
     assert column == 5, f"payload is column {column}; adjust baseline_read"
     baseline_read(db)  # warm the page cache so both sides read from memory
     base_n, base_s = baseline_read(db)
-    replayed, seconds = time_rebuild(db)
+    replayed, seconds = time_rebuild(url_for(db))
     rate, base_rate = replayed / seconds, base_n / base_s
     print()
     print(f"   baseline: sqlite3 SELECT * + json.loads   {base_rate:>12,.0f} events/s "
@@ -150,6 +160,65 @@ def measure(db: Path) -> None:
           f"{TARGET_EVENTS_PER_S:,}  {verdict(rate >= TARGET_EVENTS_PER_S)}")
 
 
+COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "payload", "occurred_at_ns",
+           "recorded_at_ns", "schema_version", "hash")
+
+
+def copy_to_postgresql(db: Path, url: str) -> int:
+    """The SQLite log's records, as they are (same hashes), into a new PostgreSQL log."""
+    import psycopg
+
+    FaultLedger.open(url).close()  # the schema
+    source = sqlite3.connect(db)
+    count = 0
+    with psycopg.connect(url.replace("postgresql+psycopg", "postgresql")) as conn:
+        with conn.cursor() as cursor, cursor.copy(
+                f"COPY events ({', '.join(COLUMNS)}) FROM STDIN") as copy:
+            for row in source.execute(f"SELECT {', '.join(COLUMNS)} FROM events ORDER BY seq"):
+                copy.write_row(row)
+                count += 1
+        conn.execute("ANALYZE events")
+    source.close()
+    return count
+
+
+def baseline_read_postgresql(url: str) -> tuple[int, float]:
+    """The floor of a replay on PostgreSQL: every row through psycopg (a server-side cursor,
+    as the log's reads page through it) and json.loads of its payload."""
+    import psycopg
+
+    start = time.perf_counter()
+    count = 0
+    with (psycopg.connect(url.replace("postgresql+psycopg", "postgresql")) as conn,
+          conn.cursor(name="scan") as cursor):
+        cursor.itersize = 5_000
+        cursor.execute("SELECT * FROM events ORDER BY seq")
+        for row in cursor:
+            json.loads(row[5])
+            count += 1
+    return count, time.perf_counter() - start
+
+
+def measure_postgresql(db: Path) -> None:
+    with pg_server.running() as server:
+        url = server.database("rebuild")
+        copied = copy_to_postgresql(db, url)
+        baseline_read_postgresql(url)  # warm the server's cache
+        base_n, base_s = baseline_read_postgresql(url)
+        replayed, seconds = time_rebuild(url)
+    assert replayed == copied == base_n, (replayed, copied, base_n)
+    rate, base_rate = replayed / seconds, base_n / base_s
+    print()
+    print(f"   PostgreSQL: psycopg SELECT * + json.loads {base_rate:>12,.0f} events/s "
+          f"({base_n:,} rows in {base_s:.2f} s)")
+    print(f"   PostgreSQL: FaultLedger.rebuild()           {rate:>12,.0f} events/s "
+          f"({replayed:,} records in {seconds:.2f} s)")
+    print(f"   PostgreSQL rebuild vs baseline               {ratio(rate, base_rate):>10.2f}x   "
+          f"target >= {TARGET_RATIO}x  {verdict(rate / base_rate >= TARGET_RATIO)}")
+    print(f"   PostgreSQL rebuild absolute (events/s)       {rate:>10,.0f}   target >= "
+          f"{TARGET_EVENTS_PER_S:,}  {verdict(rate >= TARGET_EVENTS_PER_S)}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="100,000 reports")
@@ -161,6 +230,8 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, default=None,
                         help="build the log at PATH and keep it (reused when it is already "
                              "large enough; startup.py --db PATH reads it)")
+    parser.add_argument("--postgresql", action="store_true",
+                        help="also measure the rebuild of the same log on PostgreSQL")
     args = parser.parse_args()
     reports = args.reports or (100_000 if args.quick else 1_000_000)
     header(f"rebuild: replay of a {reports:,}-report log over {args.codes:,} codes")
@@ -169,6 +240,8 @@ def main() -> None:
         db.parent.mkdir(parents=True, exist_ok=True)
         ensure_log(db, reports, args.codes, args.threads)
         measure(db)
+        if args.postgresql:
+            measure_postgresql(db)
         print(f"   kept {db} (delete it when done: rm {db}*)")
         return
     SCRATCH.mkdir(parents=True, exist_ok=True)
@@ -176,6 +249,8 @@ def main() -> None:
         db = workdir / "log.db"
         build_log(db, reports, args.codes, args.threads)
         measure(db)
+        if args.postgresql:
+            measure_postgresql(db)
 
 
 if __name__ == "__main__":
