@@ -112,7 +112,10 @@ class StatsFold:
         self._started_at: dict[int, int] = {}
         """start_seq → index in ``_out.started`` (ending an episode finds it in O(1))."""
         self._saved_len: tuple[int, int, int, int] | None = None
-        self._saved_tracks: dict[str, CodeTrack] | None = None
+        self._undo: dict[str, CodeTrack | None] = {}
+        """While staged: each code's entry in the output's tracks before the stage touched it
+        (None: it had none). An undo log, not a copy: staging costs nothing however many
+        codes the output holds."""
 
     def track(self, code: str) -> CodeTrack:
         if self._staged is not None and code in self._staged:
@@ -130,28 +133,32 @@ class StatsFold:
         self._staged = {}
         self._saved_len = (len(self._out.facts), len(self._out.started), len(self._out.ended),
                            len(self._out.goals))
-        self._saved_tracks = dict(self._out.tracks)
+        self._undo = {}
 
     def commit(self) -> None:
         if self._staged:
             self._tracks.update(self._staged)
         self._staged = None
         self._saved_len = None
-        self._saved_tracks = None
+        self._undo = {}
 
     def rollback(self) -> None:
-        if self._saved_len is not None and self._saved_tracks is not None:
+        if self._saved_len is not None:
             facts, started, ended, goals = self._saved_len
             del self._out.facts[facts:]
             del self._out.started[started:]
             del self._out.ended[ended:]
             del self._out.goals[goals:]
-            self._out.tracks.clear()
-            self._out.tracks.update(self._saved_tracks)
+            tracks = self._out.tracks
+            for code, before in self._undo.items():
+                if before is None:
+                    del tracks[code]
+                else:
+                    tracks[code] = before
             self._started_at = {e.start_seq: i for i, e in enumerate(self._out.started)}
         self._staged = None
         self._saved_len = None
-        self._saved_tracks = None
+        self._undo = {}
 
     def peek(self) -> StatsOutput:
         """What was produced since the last ``take``, staged part included, kept: saved
@@ -165,12 +172,14 @@ class StatsFold:
         self._started_at = {}
         if self._saved_len is not None:
             self._saved_len = (0, 0, 0, 0)
-            self._saved_tracks = {}
+            self._undo = {}
         return out
 
     def _put(self, code: str, track: CodeTrack) -> None:
         if self._staged is not None:
             self._staged[code] = track
+            if code not in self._undo:
+                self._undo[code] = self._out.tracks.get(code)
         else:
             self._tracks[code] = track
         self._out.tracks[code] = track
