@@ -27,7 +27,7 @@ from _common import (
     verdict,
 )
 from faultledger import FaultLedger, Policy
-from faultledger.store.schema import stat_facts
+from faultledger.store.schema import events, stat_facts
 
 sys.path.insert(0, str(ROOT))
 from tests import pg_server  # the tests' server helper
@@ -160,8 +160,8 @@ def measure(db: Path) -> None:
           f"{TARGET_EVENTS_PER_S:,}  {verdict(rate >= TARGET_EVENTS_PER_S)}")
 
 
-COLUMNS = ("seq", "event_id", "kind", "fault_code", "source_id", "payload", "occurred_at_ns",
-           "recorded_at_ns", "schema_version", "hash")
+COLUMNS = tuple(column.name for column in events.columns)
+"""The log's columns, as the schema defines them."""
 
 
 def copy_to_postgresql(db: Path, url: str) -> int:
