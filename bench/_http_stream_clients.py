@@ -1,6 +1,7 @@
 """N SSE clients in one asyncio process, for bench/http_api.py: each records the receive time of
 every event id. Usage: _http_stream_clients.py URL N SECONDS OUT.json
-Prints "connected" once every client has its stream open."""
+Prints "connected" once every client has its stream open, then reads the last seq sent from
+stdin: each client stops once it has that id, or SECONDS after it was given (a real loss)."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ class Received:
 
 
 async def client(http: httpx.AsyncClient, received: Received,
-                 opened: asyncio.Event, counter: list[int], total: int, until: float) -> None:
+                 opened: asyncio.Event, counter: list[int], total: int) -> None:
     async with http.stream("GET", "/api/v1/faults/stream") as response:
         counter[0] += 1
         if counter[0] == total:
@@ -41,8 +42,6 @@ async def client(http: httpx.AsyncClient, received: Received,
                 received.ids.append(int(found))
                 received.times.append(now)
             rest = text[cut:]
-            if now > until:
-                return
 
 
 async def main(url: str, count: int, seconds: float, out: str) -> None:
@@ -50,14 +49,16 @@ async def main(url: str, count: int, seconds: float, out: str) -> None:
     results = [Received() for _ in range(count)]
     opened = asyncio.Event()
     counter = [0]
-    until = time.time() + seconds
     async with httpx.AsyncClient(base_url=url, limits=limits,
                                  timeout=httpx.Timeout(10, read=None)) as http:
-        tasks = [asyncio.create_task(client(http, results[i], opened, counter, count, until))
+        tasks = [asyncio.create_task(client(http, results[i], opened, counter, count))
                  for i in range(count)]
         await asyncio.wait_for(opened.wait(), 30)
         print("connected", flush=True)
-        await asyncio.wait(tasks, timeout=seconds + 10)
+        line = await asyncio.get_running_loop().run_in_executor(None, sys.stdin.readline)
+        last, until = int(line), time.time() + seconds
+        while time.time() < until and not all(r.ids and r.ids[-1] >= last for r in results):
+            await asyncio.sleep(0.1)
         for task in tasks:
             task.cancel()
     with open(out, "w") as file:

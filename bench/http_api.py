@@ -150,20 +150,28 @@ def stream_run(folder: Path, name: str, clients: int, rate: float, seconds: floa
         if clients:
             readers = subprocess.Popen(
                 [sys.executable, str(BENCH_DIR / "_http_stream_clients.py"), url, str(clients),
-                 str(seconds + 5), str(out)], stdout=subprocess.PIPE, text=True)
+                 "30", str(out)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
             assert readers.stdout is not None
             assert readers.stdout.readline().strip() == "connected"
         sent, achieved, _ = send(url, rate, seconds)
         latencies: list[float] = []
         problems = 0
         if readers is not None:
-            readers.wait(seconds + 60)
+            assert readers.stdin is not None
+            readers.stdin.write(f"{max(sent, default=0)}\n")
+            readers.stdin.close()
+            readers.wait(60)
             expected = sorted(sent)
-            for received in json.loads(out.read_text()):
+            for number, received in enumerate(json.loads(out.read_text())):
                 ids = [i for i, _ in received]
                 wanted = [i for i in ids if i in sent]
                 if wanted != expected or ids != sorted(set(ids)):
                     problems += 1
+                    missing = sorted(set(expected) - set(wanted))
+                    print(f"   client {number}: {len(missing)} missing (first "
+                          f"{missing[:3]}), last received {ids[-1] if ids else None} of "
+                          f"{expected[-1]}, {len(ids) - len(set(ids))} duplicates, "
+                          f"in order: {ids == sorted(ids)}")
                 latencies.extend(at - sent[i] for i, at in received if i in sent)
     return achieved, latencies, problems, len(sent)
 
