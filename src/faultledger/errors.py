@@ -15,6 +15,9 @@ class Reason(StrEnum):
     NOT_FOUND = "not_found"
     DUPLICATE = "duplicate"
     """Already recorded (an event_id, a goal outcome): accepted, nothing stored again."""
+    CONFLICT = "conflict"
+    """The fault's state does not allow it now (acknowledging a CLEARED fault); nothing was
+    stored."""
     UNAVAILABLE = "unavailable"
     """The database cannot serve now (locked, full, read-only, damaged, closed)."""
     UNAUTHORIZED = "unauthorized"

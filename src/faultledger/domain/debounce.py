@@ -61,6 +61,9 @@ def apply_report(
             reporting_sources=(report.source_id,),
             debounce_counter=-1,
             last_report_failed=True,
+            first_ever_ns=at_ns,
+            episode_failures=1,
+            total_failures=1,
         )
     if fault.status is FaultStatus.CLEARED:
         if not failed:
@@ -77,6 +80,10 @@ def apply_report(
             reporting_sources=_sources(fault, report.source_id),
             debounce_counter=-1,
             last_report_failed=True,
+            first_ever_ns=fault.first_ever_ns,
+            episode_failures=1,
+            total_failures=fault.total_failures + 1,
+            shelved=fault.shelved,  # a new episode: a new acknowledgement, the same shelving
         )
     if failed:
         counter = clamp(clamp(fault.debounce_counter, params) - 1, params)
@@ -92,6 +99,12 @@ def apply_report(
             reporting_sources=_sources(fault, report.source_id),
             debounce_counter=counter,
             last_report_failed=True,
+            first_ever_ns=fault.first_ever_ns,
+            episode_failures=fault.episode_failures + 1,
+            total_failures=fault.total_failures + 1,
+            confirmed_ns=fault.confirmed_ns,
+            acknowledged=fault.acknowledged,
+            shelved=fault.shelved,
         )
     counter = clamp(clamp(fault.debounce_counter, params) + 1, params)
     return Fault(
@@ -106,6 +119,12 @@ def apply_report(
         reporting_sources=fault.reporting_sources,
         debounce_counter=counter,
         last_report_failed=False,
+        first_ever_ns=fault.first_ever_ns,
+        episode_failures=fault.episode_failures,
+        total_failures=fault.total_failures,
+        confirmed_ns=fault.confirmed_ns,
+        acknowledged=fault.acknowledged,
+        shelved=fault.shelved,
     )
 
 

@@ -24,6 +24,9 @@ POLICY_CHANGED = "policy_changed"
 RECLASSIFIED_ON_STARTUP = "reclassified_on_startup"
 GOAL_OUTCOME = "goal_outcome"
 LEDGER_IDENTIFIED = "ledger_identified"
+FAULT_ACKNOWLEDGED = "fault_acknowledged"
+FAULT_SHELVED = "fault_shelved"
+FAULT_UNSHELVED = "fault_unshelved"
 
 GOAL_STATUSES = ("SUCCEEDED", "ABORTED", "CANCELED")
 """Terminal statuses of an action goal a goal outcome record can carry."""
@@ -150,9 +153,77 @@ class LedgerIdentified(NamedTuple):
         return {"robot_id": self.robot_id, "ledger_id": self.ledger_id}
 
 
+class FaultAcknowledged(NamedTuple):
+    """An operator has seen episode ``episode`` of a fault (docs/semantics.md, "The
+    operator's day"). Changes no status; the next episode needs its own acknowledgement."""
+
+    fault_code: str
+    actor: str
+    note: str
+    episode: int
+    """The fault's ``occurrence_count`` when it was acknowledged."""
+
+    @property
+    def source_id(self) -> str:
+        return self.actor
+
+    @property
+    def kind(self) -> str:
+        return FAULT_ACKNOWLEDGED
+
+    def payload(self) -> dict[str, Any]:
+        return {"fault_code": self.fault_code, "actor": self.actor, "note": self.note,
+                "episode": self.episode}
+
+
+class FaultShelved(NamedTuple):
+    """A known nuisance hidden until ``until_ns`` (ISA-18.2 shelving): status and counts go
+    on as before; lists, the dashboard and alerts leave it out."""
+
+    fault_code: str
+    actor: str
+    reason: str
+    until_ns: int
+
+    @property
+    def source_id(self) -> str:
+        return self.actor
+
+    @property
+    def kind(self) -> str:
+        return FAULT_SHELVED
+
+    def payload(self) -> dict[str, Any]:
+        return {"fault_code": self.fault_code, "actor": self.actor, "reason": self.reason,
+                "until_ns": self.until_ns}
+
+
+class FaultUnshelved(NamedTuple):
+    """The end of a shelving: by an operator, or by the serving process when it expired
+    (actor ``timer``, stamped with the expiry time, so a replay ends it at the same time)."""
+
+    fault_code: str
+    actor: str
+    reason: str
+
+    @property
+    def source_id(self) -> str:
+        return self.actor
+
+    @property
+    def kind(self) -> str:
+        return FAULT_UNSHELVED
+
+    def payload(self) -> dict[str, Any]:
+        return {"fault_code": self.fault_code, "actor": self.actor, "reason": self.reason}
+
+
+OperatorEvent = FaultAcknowledged | FaultShelved | FaultUnshelved
+"""Records of what people did about a fault, beside what the robot reported."""
+
 DomainEvent = (
     FaultReported | FaultCleared | FaultConfirmedByTimer | PolicyChanged | ReclassifiedOnStartup
-    | GoalOutcome | LedgerIdentified
+    | GoalOutcome | LedgerIdentified | FaultAcknowledged | FaultShelved | FaultUnshelved
 )
 KINDS = (
     FAULT_REPORTED,
@@ -162,6 +233,9 @@ KINDS = (
     RECLASSIFIED_ON_STARTUP,
     GOAL_OUTCOME,
     LEDGER_IDENTIFIED,
+    FAULT_ACKNOWLEDGED,
+    FAULT_SHELVED,
+    FAULT_UNSHELVED,
 )
 
 
@@ -173,7 +247,8 @@ def fault_code_of(event: DomainEvent) -> str | None:
 
 
 def source_of(event: DomainEvent) -> str | None:
-    if isinstance(event, FaultReported | FaultCleared | GoalOutcome):
+    if isinstance(event, FaultReported | FaultCleared | GoalOutcome | FaultAcknowledged
+                  | FaultShelved | FaultUnshelved):
         return event.source_id
     return None
 
@@ -201,6 +276,11 @@ _DECODERS: dict[str, Callable[[Mapping[str, Any]], DomainEvent]] = {
     GOAL_OUTCOME: lambda p: GoalOutcome(p["action"], p["goal_id"], p["status"],
                                         p["server_node"]),
     LEDGER_IDENTIFIED: lambda p: LedgerIdentified(p["robot_id"], p["ledger_id"]),
+    FAULT_ACKNOWLEDGED: lambda p: FaultAcknowledged(p["fault_code"], p["actor"], p["note"],
+                                                    p["episode"]),
+    FAULT_SHELVED: lambda p: FaultShelved(p["fault_code"], p["actor"], p["reason"],
+                                          p["until_ns"]),
+    FAULT_UNSHELVED: lambda p: FaultUnshelved(p["fault_code"], p["actor"], p["reason"]),
 }
 
 Upcaster = Callable[[dict[str, Any]], dict[str, Any]]

@@ -9,6 +9,25 @@ from faultledger.domain.clock import from_ns
 from faultledger.domain.types import FaultStatus
 
 
+class Acknowledgement(NamedTuple):
+    """Who acknowledged the current episode, when (the record's occurred_at), and why."""
+
+    actor: str
+    note: str
+    at_ns: int
+    seq: int
+
+
+class Shelving(NamedTuple):
+    """Who shelved the fault, why, from when until when (``until_ns``: expiry)."""
+
+    actor: str
+    reason: str
+    at_ns: int
+    until_ns: int
+    seq: int
+
+
 class Fault(NamedTuple):
     """One fault per fault_code, aggregated over all sources (SPEC §4).
 
@@ -30,6 +49,19 @@ class Fault(NamedTuple):
     reporting_sources: tuple[str, ...]
     debounce_counter: int
     last_report_failed: bool = False
+    first_ever_ns: int = 0
+    """The first FAILED ever; ``first_occurred`` is the start of the current episode (it
+    moves on reactivation, as medkit's does)."""
+    episode_failures: int = 0
+    """FAILED reports in the current episode (creation or reactivation up to now)."""
+    total_failures: int = 0
+    """FAILED reports ever, over all episodes."""
+    confirmed_ns: int = 0
+    """When the current episode first became CONFIRMED (0: not yet): the start of MTTA."""
+    acknowledged: Acknowledgement | None = None
+    """The current episode's first acknowledgement; None: unacknowledged."""
+    shelved: Shelving | None = None
+    """The shelving in force (or expired but not yet ended by a record: ``is_shelved``)."""
 
     @property
     def first_occurred(self) -> datetime:
@@ -46,3 +78,13 @@ class Fault(NamedTuple):
     @property
     def is_active(self) -> bool:
         return self.status is not FaultStatus.CLEARED
+
+    @property
+    def episode(self) -> int:
+        """Episode number: 1 on creation, +1 on each reactivation from CLEARED."""
+        return self.occurrence_count
+
+    def is_shelved(self, now_ns: int) -> bool:
+        """Shelved and not yet expired at ``now_ns``. An expired shelving is over even before
+        the serving process records its end (a stopped server records it when it starts)."""
+        return self.shelved is not None and now_ns < self.shelved.until_ns

@@ -8,16 +8,19 @@ from typing import NamedTuple
 from faultledger.domain import debounce
 from faultledger.domain.events import (
     DomainEvent,
+    FaultAcknowledged,
     FaultCleared,
     FaultConfirmedByTimer,
     FaultReported,
+    FaultShelved,
+    FaultUnshelved,
     GoalOutcome,
     LedgerIdentified,
     LogRecord,
     PolicyChanged,
     ReclassifiedOnStartup,
 )
-from faultledger.domain.fault import Fault
+from faultledger.domain.fault import Acknowledgement, Fault, Shelving
 from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.notifications import for_status_change
 from faultledger.domain.policy import Policy
@@ -195,6 +198,8 @@ class Projector:
             return self._move(record, event.fault_code, FaultStatus.PREFAILED, "timer", "timer")
         if isinstance(event, ReclassifiedOnStartup):
             return self._move(record, event.fault_code, FaultStatus.HEALED, "startup", "startup")
+        if isinstance(event, FaultAcknowledged | FaultShelved | FaultUnshelved):
+            return self._operator(record, event)
         if isinstance(event, PolicyChanged):
             self.policy = Policy.model_validate(event.policy)
             self.policy_recorded = True
@@ -219,6 +224,8 @@ class Projector:
         new = debounce.apply_report(old, event, params, record.occurred_at_ns)
         if new is None or new is old:
             return _NOTHING
+        if new.status is FaultStatus.CONFIRMED and not new.confirmed_ns:
+            new = new._replace(confirmed_ns=record.occurred_at_ns)
         self._put(new)
         old_status = None if old is None else old.status
         return Effect(
@@ -245,13 +252,42 @@ class Projector:
         if old is None or old.status is not required:
             return _NOTHING
         if required is FaultStatus.PREFAILED:
-            new = old._replace(status=FaultStatus.CONFIRMED)
+            new = old._replace(status=FaultStatus.CONFIRMED,
+                               confirmed_ns=old.confirmed_ns or record.occurred_at_ns)
             notification = NotificationType.CONFIRMED
         else:
             new = old._replace(status=FaultStatus.CLEARED, last_report_failed=False)
             notification = None
         self._put(new)
         return Effect(new, self._transition(record, new, old.status, cause, source), notification)
+
+    def _operator(self, record: LogRecord,
+                  event: FaultAcknowledged | FaultShelved | FaultUnshelved) -> Effect:
+        """What people did: the status and counts stay; a record that no longer fits the
+        fault (an acknowledgement of an episode that is over, or already acknowledged;
+        the end of a shelving that is not in force) changes nothing."""
+        old = self.get(event.fault_code)
+        if old is None:
+            return _NOTHING
+        at = record.occurred_at_ns
+        if isinstance(event, FaultAcknowledged):
+            if (old.status is FaultStatus.CLEARED or old.acknowledged is not None
+                    or old.episode != event.episode):
+                return _NOTHING
+            new = old._replace(acknowledged=Acknowledgement(event.actor, event.note, at,
+                                                            record.seq))
+            notification = NotificationType.ACKNOWLEDGED
+        elif isinstance(event, FaultShelved):
+            new = old._replace(shelved=Shelving(event.actor, event.reason, at, event.until_ns,
+                                                record.seq))
+            notification = NotificationType.SHELVED
+        else:
+            if old.shelved is None:
+                return _NOTHING
+            new = old._replace(shelved=None)
+            notification = NotificationType.UNSHELVED
+        self._put(new)
+        return Effect(new, None, notification)
 
     @staticmethod
     def _transition(

@@ -40,3 +40,12 @@ class NotificationType(StrEnum):
     CONFIRMED = "fault_confirmed"
     UPDATED = "fault_updated"
     CLEARED = "fault_cleared"
+    ACKNOWLEDGED = "fault_acknowledged"
+    """Ours (not medkit's): the ROS events topic leaves these three out."""
+    SHELVED = "fault_shelved"
+    UNSHELVED = "fault_unshelved"
+
+
+MEDKIT_NOTIFICATIONS = frozenset({NotificationType.CONFIRMED, NotificationType.UPDATED,
+                                  NotificationType.CLEARED})
+"""The event types ros2_medkit's FaultEvent carries; a drop-in peer publishes only these."""

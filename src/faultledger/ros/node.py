@@ -36,6 +36,7 @@ from ros2_medkit_msgs.srv import (
 
 from faultledger.domain.notifications import Notification
 from faultledger.domain.policy import Policy
+from faultledger.domain.types import MEDKIT_NOTIFICATIONS
 from faultledger.errors import InvalidInputError
 from faultledger.ros import convert
 from faultledger.ros.guard import (
@@ -220,8 +221,11 @@ class FaultManagerNode:
         return refuse
 
     def publish(self, notification: Notification) -> None:
-        """Called by the ledger after the change is durable, in log order."""
-        self.events.publish(convert.event_msg(notification))
+        """Called by the ledger after the change is durable, in log order. Only medkit's
+        event types: a drop-in peer's subscribers know no others (acknowledgements and
+        shelvings are on the HTTP stream)."""
+        if notification.event_type in MEDKIT_NOTIFICATIONS:
+            self.events.publish(convert.event_msg(notification))
 
     def report_fault(self, request: Any, response: Any) -> Any:
         return self._report_burst(self.report_service, request, response, idempotent=False)

@@ -10,12 +10,12 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import datetime, timedelta
 from types import TracebackType
 
 from sqlalchemy import Connection
 
-from faultledger.domain import queries, validation
+from faultledger.domain import attention, queries, validation
 from faultledger.domain.clock import NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.events import FaultCleared, LogRecord
 from faultledger.domain.fault import Fault
@@ -33,7 +33,7 @@ from faultledger.errors import (
     Reason,
     clipped,
 )
-from faultledger.service import audit, statistics
+from faultledger.service import audit, operator, statistics
 from faultledger.service.arguments import aware_ns, check_limit, record_filter, seq_number
 from faultledger.service.commands import goal_command, report_command
 from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
@@ -49,6 +49,7 @@ from faultledger.service.results import (
     Downtime,
     EntityLookup,
     FaultLookup,
+    OperatorResult,
     ReportResult,
     VerifyReport,
 )
@@ -59,6 +60,8 @@ from faultledger.service.writer import (
     Command,
     ConfirmOverdue,
     Exclusive,
+    ExpireShelvings,
+    Operate,
     ReclassifyHealed,
     RecordPolicy,
     Writer,
@@ -289,11 +292,47 @@ class FaultLedger:
             return ClearResult(False, str(error), reason=error.reason)
         return result
 
+    # -- the operator's day (docs/semantics.md) ---------------------------------------------
+    def acknowledge(self, fault_code: str, actor: str = "api", note: str = "",
+                    at: datetime | None = None) -> OperatorResult:
+        """Record that ``actor`` has seen the fault's current episode; the status stays. A
+        second acknowledgement of one episode records nothing (reason ``duplicate``)."""
+        return self._operate(operator.acknowledge(fault_code, actor, note, at))
+
+    def shelve(self, fault_code: str, duration: str | timedelta | float, actor: str = "api",
+               reason: str = "", at: datetime | None = None) -> OperatorResult:
+        """Hide a known nuisance from lists and alerts for ``duration`` (``2h``, a timedelta,
+        seconds; at most 30 days); its status and counts go on. Shelving a shelved fault
+        replaces the shelving (a new end)."""
+        return self._operate(operator.shelve(fault_code, actor, reason, duration, at))
+
+    def unshelve(self, fault_code: str, actor: str = "api", reason: str = "",
+                 at: datetime | None = None) -> OperatorResult:
+        return self._operate(operator.unshelve(fault_code, actor, reason, at))
+
+    def _operate(self, command: Operate | OperatorResult) -> OperatorResult:
+        if isinstance(command, OperatorResult):
+            return command
+        try:
+            result: OperatorResult = self._writer.submit(command)
+        except FaultLedgerError as error:
+            return OperatorResult(False, str(error), reason=error.reason)
+        return result
+
     def run_timers(self, now: datetime | None = None) -> int:
-        """Confirm PREFAILED faults whose last FAILED is ``auto_confirm_after_sec`` old."""
+        """Confirm PREFAILED faults whose last FAILED is ``auto_confirm_after_sec`` old, and
+        end the shelvings expired by ``now`` (each record stamped with its expiry)."""
         now_ns = time.time_ns() if now is None else to_ns(now)
         count: int = self._writer.submit(ConfirmOverdue(now_ns))
+        count += self._expire_shelvings(now_ns)
         return count
+
+    def _expire_shelvings(self, now_ns: int) -> int:
+        """Only a commit when one is due: the ticker asks every second."""
+        if not attention.expired_shelvings(self._writer.projector.committed(), now_ns):
+            return 0
+        ended: int = self._writer.submit(ExpireShelvings(now_ns))
+        return ended
 
     def rebuild(self) -> int:
         """Drop the projections and replay the whole log; returns the records replayed."""
@@ -527,6 +566,7 @@ class FaultLedger:
                 self._writer.save_if_due()
                 if self.policy.auto_confirm_after_sec > 0:
                     self._writer.submit(ConfirmOverdue(time.time_ns()))
+                self._expire_shelvings(time.time_ns())
             except FaultLedgerError as error:
                 log.warning("background check failed: %s", error)
 

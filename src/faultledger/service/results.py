@@ -45,6 +45,24 @@ class ClearResult:
 
 
 @dataclass(frozen=True, slots=True)
+class OperatorResult:
+    """The answer to an acknowledgement, shelving or unshelving."""
+
+    success: bool
+    message: str
+    seq: int | None = None
+    """The record made; None when nothing was recorded (refused, or already acknowledged)."""
+    reason: str = ""
+    """A ``Reason``: ok, duplicate (already acknowledged), invalid, not_found, conflict,
+    unavailable or internal."""
+    fault: Fault | None = None
+    """The fault after the action (as it was, when nothing was recorded)."""
+
+    def __post_init__(self) -> None:
+        _default_reason(self, self.success)
+
+
+@dataclass(frozen=True, slots=True)
 class FaultLookup:
     success: bool
     message: str

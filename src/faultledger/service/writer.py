@@ -20,15 +20,19 @@ from typing import Any
 
 from sqlalchemy import Connection
 
-from faultledger.domain import debounce
+from faultledger.domain import attention, debounce
 from faultledger.domain.events import (
     DomainEvent,
+    FaultAcknowledged,
     FaultCleared,
     FaultConfirmedByTimer,
     FaultReported,
+    FaultShelved,
+    FaultUnshelved,
     GoalOutcome,
     LedgerIdentified,
     LogRecord,
+    OperatorEvent,
     PolicyChanged,
     ReclassifiedOnStartup,
 )
@@ -49,7 +53,7 @@ from faultledger.errors import (
 )
 from faultledger.service import restore
 from faultledger.service.event_ids import new_event_id
-from faultledger.service.results import ClearResult, ReportResult
+from faultledger.service.results import ClearResult, OperatorResult, ReportResult
 from faultledger.service.telemetry import Telemetry
 from faultledger.store import event_log, projections, stat_tables
 from faultledger.store.database import Database, WriteConnection, describe
@@ -71,6 +75,22 @@ class Report:
 class Clear:
     event: FaultCleared
     occurred_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class Operate:
+    """An acknowledgement, shelving or unshelving by a person; decided against the fault as
+    it is inside the commit (an acknowledgement gets the episode then)."""
+
+    event: OperatorEvent
+    occurred_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class ExpireShelvings:
+    """End the shelvings expired by ``now_ns``, each stamped with its expiry time."""
+
+    now_ns: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,8 +135,8 @@ class SaveProjections:
     """Save the projections now (before a read of the saved ones)."""
 
 
-Command = (Report | Clear | RecordGoal | ConfirmOverdue | ReclassifyHealed | RecordPolicy
-           | CatchUp | Exclusive | SaveProjections)
+Command = (Report | Clear | Operate | RecordGoal | ConfirmOverdue | ExpireShelvings
+           | ReclassifyHealed | RecordPolicy | CatchUp | Exclusive | SaveProjections)
 
 SAVE_EVERY_RECORDS = 1_000
 """Unsaved records at which a commit also saves the projections (docs/architecture.md,
@@ -515,6 +535,8 @@ class Writer:
                 pending.result = ReportResult(False, str(error), reason=error.reason)
             elif isinstance(pending.command, Clear):
                 pending.result = ClearResult(False, str(error), reason=error.reason)
+            elif isinstance(pending.command, Operate):
+                pending.result = OperatorResult(False, str(error), reason=error.reason)
             else:
                 pending.error = error
             pending.done = True
@@ -565,6 +587,16 @@ class Writer:
             self._ensure_policy(batch)
             seq = batch.add(command.event, command.occurred_ns)
             return ClearResult(True, f"Fault cleared: {code}", seq)
+        if isinstance(command, Operate):
+            return self._operate(command, batch)
+        if isinstance(command, ExpireShelvings):
+            due = attention.expired_shelvings(list(projector.snapshot().values()),
+                                              command.now_ns)
+            for fault in due:
+                assert fault.shelved is not None
+                batch.add(FaultUnshelved(fault.fault_code, attention.EXPIRY_ACTOR, "expired"),
+                          fault.shelved.until_ns)
+            return len(due)
         if isinstance(command, ConfirmOverdue):
             codes = projector.overdue_for_timer(command.now_ns)
             after = projector.policy.auto_confirm_after_sec
@@ -584,6 +616,30 @@ class Writer:
         if isinstance(command, CatchUp | SaveProjections):
             return projector.seq
         return command.action(conn, self)
+
+    def _operate(self, command: Operate, batch: _Batch) -> OperatorResult:
+        """The rules are the domain's (``attention``); the writer only applies them to the
+        fault as this commit sees it."""
+        event = command.event
+        code = event.fault_code
+        fault = self.projector.get(code)
+        if isinstance(event, FaultAcknowledged):
+            refusal = attention.acknowledge_refusal(fault, code)
+        elif isinstance(event, FaultShelved):
+            refusal = attention.shelve_refusal(fault, code)
+        else:
+            refusal = attention.unshelve_refusal(fault, code)
+        if refusal is not None:
+            return OperatorResult(False, refusal.message, reason=refusal.reason, fault=fault)
+        assert fault is not None
+        if isinstance(event, FaultAcknowledged):
+            done = attention.already_acknowledged(fault)
+            if done is not None:
+                return OperatorResult(True, done, reason=Reason.DUPLICATE, fault=fault)
+            event = event._replace(episode=fault.episode)
+        seq = batch.add(event, command.occurred_ns)
+        after = self.projector.get(code)
+        return OperatorResult(True, attention.done_message(event), seq, fault=after)
 
     @staticmethod
     def _goal(command: RecordGoal, batch: _Batch, known: set[str]) -> ReportResult:

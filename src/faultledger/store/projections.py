@@ -10,7 +10,7 @@ from typing import Any
 
 from sqlalchemy import Connection, delete, select
 
-from faultledger.domain.fault import Fault
+from faultledger.domain.fault import Acknowledgement, Fault, Shelving
 from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json
 from faultledger.domain.projector import Transition
@@ -43,6 +43,13 @@ def _fault_row(fault: Fault) -> dict[str, Any]:
         "reporting_sources": canonical_json(fault.reporting_sources),
         "debounce_counter": fault.debounce_counter,
         "last_report_failed": fault.last_report_failed,
+        "first_ever_ns": fault.first_ever_ns,
+        "episode_failures": fault.episode_failures,
+        "total_failures": fault.total_failures,
+        "confirmed_ns": fault.confirmed_ns,
+        "acknowledged": None if fault.acknowledged is None else canonical_json(
+            list(fault.acknowledged)),
+        "shelved": None if fault.shelved is None else canonical_json(list(fault.shelved)),
     }
 
 
@@ -59,6 +66,13 @@ def _fault(row: Any) -> Fault:
         reporting_sources=tuple(json.loads(row.reporting_sources)),
         debounce_counter=row.debounce_counter,
         last_report_failed=bool(row.last_report_failed),
+        first_ever_ns=row.first_ever_ns,
+        episode_failures=row.episode_failures,
+        total_failures=row.total_failures,
+        confirmed_ns=row.confirmed_ns,
+        acknowledged=None if row.acknowledged is None else Acknowledgement(
+            *json.loads(row.acknowledged)),
+        shelved=None if row.shelved is None else Shelving(*json.loads(row.shelved)),
     )
 
 

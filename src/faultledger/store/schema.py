@@ -50,6 +50,13 @@ faults = Table(
     Column("reporting_sources", Text, nullable=False),
     Column("debounce_counter", Integer, nullable=False),
     Column("last_report_failed", Boolean, nullable=False),
+    # Alembic 0007: the operator's day and the episodes (docs/semantics.md).
+    Column("first_ever_ns", BigInteger, nullable=False, server_default="0"),
+    Column("episode_failures", Integer, nullable=False, server_default="0"),
+    Column("total_failures", Integer, nullable=False, server_default="0"),
+    Column("confirmed_ns", BigInteger, nullable=False, server_default="0"),
+    Column("acknowledged", Text, nullable=True),  # JSON [actor, note, at_ns, seq]
+    Column("shelved", Text, nullable=True),  # JSON [actor, reason, at_ns, until_ns, seq]
 )
 
 transitions = Table(
