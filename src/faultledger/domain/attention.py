@@ -18,7 +18,6 @@ from faultledger.domain.validation import (
     shown,
     text_error,
 )
-from faultledger.errors import Reason
 
 MAX_SHELVE_NS = 30 * 86_400 * NS_PER_SECOND
 """The longest shelving: ISA-18.2 wants every shelving to end by itself; a month covers a
@@ -28,6 +27,11 @@ EXPIRY_ACTOR = "timer"
 
 _DURATION = re.compile(r"(?:(\d+)d)?(?:(\d+)h)?(?:(\d+)m)?(?:(\d+)s)?")
 _UNIT_NS = (86_400 * NS_PER_SECOND, 3_600 * NS_PER_SECOND, 60 * NS_PER_SECOND, NS_PER_SECOND)
+
+
+NOT_FOUND, CONFLICT = "not_found", "conflict"
+"""The values of ``faultledger.errors.Reason`` a refusal carries (the domain imports no
+other layer)."""
 
 
 class Refusal(NamedTuple):
@@ -71,9 +75,9 @@ def acknowledge_refusal(fault: Fault | None, fault_code: str) -> Refusal | None:
     """An acknowledgement needs a fault in an episode: not CLEARED (its episode is over;
     the next FAILED opens a new one, which needs its own acknowledgement)."""
     if fault is None:
-        return Refusal(Reason.NOT_FOUND, f"Fault not found: {fault_code}")
+        return Refusal(NOT_FOUND, f"Fault not found: {fault_code}")
     if fault.status is FaultStatus.CLEARED:
-        return Refusal(Reason.CONFLICT, f"Fault {fault_code} is CLEARED: its episode is over, "
+        return Refusal(CONFLICT, f"Fault {fault_code} is CLEARED: its episode is over, "
                        "nothing to acknowledge")
     return None
 
@@ -90,15 +94,15 @@ def already_acknowledged(fault: Fault) -> str | None:
 def shelve_refusal(fault: Fault | None, fault_code: str) -> Refusal | None:
     """Any known fault can be shelved, a CLEARED one too (a nuisance that keeps coming back)."""
     if fault is None:
-        return Refusal(Reason.NOT_FOUND, f"Fault not found: {fault_code}")
+        return Refusal(NOT_FOUND, f"Fault not found: {fault_code}")
     return None
 
 
 def unshelve_refusal(fault: Fault | None, fault_code: str) -> Refusal | None:
     if fault is None:
-        return Refusal(Reason.NOT_FOUND, f"Fault not found: {fault_code}")
+        return Refusal(NOT_FOUND, f"Fault not found: {fault_code}")
     if fault.shelved is None:
-        return Refusal(Reason.CONFLICT, f"Fault {fault_code} is not shelved")
+        return Refusal(CONFLICT, f"Fault {fault_code} is not shelved")
     return None
 
 
