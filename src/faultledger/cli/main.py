@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import getpass
 import json
 import os
 import sys
@@ -14,6 +13,7 @@ import typer
 from faultledger.cli import anchor as anchor_commands
 from faultledger.cli import audit, render
 from faultledger.cli import fleet as fleet_commands
+from faultledger.cli import operator as operator_commands
 from faultledger.cli import stats as stats_commands
 from faultledger.cli import web as web_commands
 from faultledger.cli.options import (
@@ -127,6 +127,8 @@ def list_faults(
     severity: Annotated[str | None, typer.Option(
         "--severity", "-s", metavar="LEVEL",
         help="Only this severity: 0-3 or INFO/WARN/ERROR/CRITICAL.")] = None,
+    shelved: Annotated[bool, typer.Option(
+        "--shelved", help="Only the shelved faults (hidden otherwise).")] = False,
     at: Annotated[str | None, typer.Option(
         "--at", metavar="SEQ|TIME",
         help=f"The table (every status) as the ledger knew it after a seq number, or after "
@@ -141,7 +143,8 @@ def list_faults(
 ) -> None:
     """List the faults: CONFIRMED ones unless --status/--all say.
 
-    Like the ROS ~/list_faults service; --at shows the table of an earlier seq or time.
+    Unacknowledged faults first; shelved ones are left out (--shelved lists only them).
+    --at shows the table of an earlier seq or time (every fault, as the log then held it).
     """
     for name in status or []:
         if name.strip().upper() not in FaultStatus.__members__:
@@ -163,8 +166,8 @@ def list_faults(
             statuses = ([s.value for s in FaultStatus] if all_statuses
                         else [name.strip().upper() for name in status or []])
             wanted_severity = None if severity is None else parse_severity(severity)
-            faults = ledger.list_faults(statuses, wanted_severity)
-            title = f"faults in {describe(ledger.url)}"
+            faults = ledger.triage(statuses, wanted_severity, "only" if shelved else "hide")
+            title = f"{'shelved ' if shelved else ''}faults in {describe(ledger.url)}"
     if as_json:
         typer.echo(json.dumps([render.fault_dict(f) for f in faults], indent=2))
     else:
@@ -208,9 +211,10 @@ def show(
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Show one fault, its status transitions and its last clear.
+    """Show one fault, its episode, acknowledgement, shelving, transitions and last clear.
 
-    Any status, also CLEARED; who cleared it last, and why.
+    Any status, also CLEARED; the first occurrence ever and the current episode's start;
+    who acknowledged and who cleared it last, and why.
     """
     setup = prepare(db, config, shifts=shifts)
     calendar = setup.calendar
@@ -240,6 +244,8 @@ def show(
     out = render.console(wide=wide)
     width = render.fit_width(out, wide)
     out.print(render.faults_table([lookup.fault], f"fault {fault_code}", calendar, width))
+    for line in render.episode_lines(lookup.fault, calendar):
+        out.print(cell(line))
     if cleared is not None and last is not None:
         reason = cleared["reason"] or "(no reason given)"
         out.print(cell(f"last cleared {render.zoned(last.occurred_at, calendar)} "
@@ -257,7 +263,7 @@ def clear(
     config: ConfigOption = None,
 ) -> None:
     """Clear a fault (recorded with who and why)."""
-    who = actor or f"cli:{_user()}"
+    who = actor or f"cli:{operator_commands.user()}"
     with opened(prepare(db, config, Role.WRITER)) as ledger:
         result = ledger.clear(fault_code, actor=who, reason=reason)
     if not result.success:
@@ -274,6 +280,8 @@ anchor_commands.register(app)
 web_commands.register(app)
 # sync: push this robot's log to a fleet central, in cli/fleet.py.
 fleet_commands.register(app)
+# ack, shelve, unshelve: the operator's day, in cli/operator.py.
+operator_commands.register(app)
 
 
 @app.command()
@@ -422,13 +430,6 @@ def demo(
     out = render.console(wide=wide)
     run_demo(setup.url, out, setup.calendar, render.fit_width(out, wide), scratch,
              setup.robot_id)
-
-
-def _user() -> str:
-    try:
-        return getpass.getuser()
-    except (KeyError, OSError):
-        return str(os.getuid())
 
 
 def main() -> None:

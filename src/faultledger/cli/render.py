@@ -126,6 +126,18 @@ def fault_dict(fault: Fault) -> dict[str, Any]:
         "occurrence_count": fault.occurrence_count,
         "reporting_sources": list(fault.reporting_sources),
         "debounce_counter": fault.debounce_counter,
+        "first_occurred_ever": when(from_ns(fault.first_ever_ns)) if fault.first_ever_ns
+        else None,
+        "episode": fault.episode,
+        "occurrences_in_episode": fault.episode_failures,
+        "occurrences_total": fault.total_failures,
+        "acknowledged": None if fault.acknowledged is None else {
+            "by": fault.acknowledged.actor, "at": when(from_ns(fault.acknowledged.at_ns)),
+            "note": fault.acknowledged.note, "seq": fault.acknowledged.seq},
+        "shelved": None if fault.shelved is None else {
+            "by": fault.shelved.actor, "at": when(from_ns(fault.shelved.at_ns)),
+            "until": when(from_ns(fault.shelved.until_ns)), "reason": fault.shelved.reason,
+            "seq": fault.shelved.seq},
     }
 
 
@@ -294,23 +306,48 @@ def faults_table(faults: Iterable[Fault], title: str, calendar: ShiftCalendar,
     """Every value from outside (code, sources, description, title) is shown literally:
     ``safe_text.cell``, never markup, never a control character. Columns that do not fit in
     ``width`` go first: sources, description, counter, count, the milliseconds of last
-    occurred, last occurred, severity."""
+    occurred, who acknowledged ("-": nobody yet), last occurred, severity."""
     zone = calendar.zone
     columns = (Column("code", no_wrap=True), Column("status", no_wrap=True),
                Column("severity", drop=1, no_wrap=True),
-               Column("count", drop=4, justify="right"),
-               Column("counter", drop=5, justify="right"),
+               Column("acked by", drop=3, cap=16),
+               Column("count", drop=5, justify="right"),
+               Column("counter", drop=6, justify="right"),
                Column(time_header("last occurred", calendar, 23, width), drop=2,
-                      no_wrap=True, squeeze=3,
+                      no_wrap=True, squeeze=4,
                       short_header=time_header("last occurred", calendar, 19, width)),
-               Column("sources", drop=7), Column("description", drop=6))
+               Column("sources", drop=8), Column("description", drop=7))
     rows: list[list[Entry]] = [
         [cell(f.fault_code), cell(f.status.value, _STATUS_STYLE[f.status]),
-         severity_name(f.severity), str(f.occurrence_count), str(f.debounce_counter),
+         severity_name(f.severity),
+         cell("-" if f.acknowledged is None else f.acknowledged.actor),
+         str(f.occurrence_count), str(f.debounce_counter),
          Short(stamp(f.last_occurred, zone), stamp(f.last_occurred, zone, ms=False)),
          cell(", ".join(f.reporting_sources)), cell(f.description)]
         for f in faults]
     return fitted(cell(title), columns, rows, width)
+
+
+def episode_lines(fault: Fault, calendar: ShiftCalendar) -> list[str]:
+    """`show`'s lines on the fault's episodes and what people did about it."""
+    def at(ns: int) -> str:
+        return zoned(from_ns(ns), calendar)
+
+    lines = [f"episode {fault.episode} since {at(fault.first_occurred_ns)}; first occurred "
+             f"{at(fault.first_ever_ns or fault.first_occurred_ns)}; occurrences (FAILED "
+             f"reports): {fault.episode_failures} in this episode, {fault.total_failures} "
+             "in total"]
+    ack = fault.acknowledged
+    if ack is not None:
+        lines.append(f"acknowledged {at(ack.at_ns)} by {ack.actor}"
+                     + (f": {ack.note}" if ack.note else ""))
+    elif fault.is_active:
+        lines.append("not acknowledged")
+    shelf = fault.shelved
+    if shelf is not None:
+        lines.append(f"shelved {at(shelf.at_ns)} by {shelf.actor} until {at(shelf.until_ns)}"
+                     + (f": {shelf.reason}" if shelf.reason else ""))
+    return lines
 
 
 def summary(record: LogRecord) -> str:
@@ -330,6 +367,14 @@ def summary(record: LogRecord) -> str:
         return f"goal {p['goal_id']} of {p['action']}: {p['status']}"
     if record.kind == "ledger_identified":
         return f"robot {p['robot_id']}, ledger {p['ledger_id']}"
+    if record.kind == "fault_acknowledged":
+        return (f"acknowledged by {p['actor']} (episode {p['episode']})"
+                + (f": {p['note']}" if p["note"] else ""))
+    if record.kind == "fault_shelved":
+        return (f"shelved by {p['actor']} until {when(from_ns(p['until_ns']))}"
+                + (f": {p['reason']}" if p["reason"] else ""))
+    if record.kind == "fault_unshelved":
+        return f"unshelved by {p['actor']}" + (f": {p['reason']}" if p["reason"] else "")
     return str(p.get("reason", ""))
 
 

@@ -5,6 +5,7 @@ against the fault state inside its transaction, and every adapter gets the same 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from typing import NamedTuple
 
 from faultledger.domain.clock import NS_PER_SECOND, from_ns
@@ -122,6 +123,17 @@ def done_message(event: OperatorEvent) -> str:
     return f"Fault unshelved: {code}"
 
 
-def attention_order(fault: Fault) -> tuple[int, str]:
-    """List order: unacknowledged first, then acknowledged; by code within each."""
-    return (0 if fault.acknowledged is None else 1, fault.fault_code)
+SHELVED_VIEWS = ("hide", "only", "show")
+"""What an operator's list does with shelved faults: hide them (the default), list only
+them (the "shelved" filter), or show them among the others."""
+
+
+def triage(faults: Iterable[Fault], now_ns: int, shelved: str = "hide") -> list[Fault]:
+    """The operator's list: shelved faults as ``shelved`` says, unacknowledged ones first,
+    by code within each group. An expired shelving no longer hides (``Fault.is_shelved``)."""
+    if shelved not in SHELVED_VIEWS:
+        raise ValueError(f"shelved must be one of {', '.join(SHELVED_VIEWS)}, got "
+                         f"{shown(shelved)}")
+    chosen = [f for f in faults
+              if shelved == "show" or f.is_shelved(now_ns) == (shelved == "only")]
+    return sorted(chosen, key=lambda f: (f.acknowledged is not None, f.fault_code))

@@ -370,6 +370,17 @@ class FaultLedger:
                     ) -> list[Fault]:
         return queries.select(self._faults(), statuses, severity)
 
+    def triage(self, statuses: Iterable[str] = (), severity: int | None = None,
+               shelved: str = "hide", now: datetime | None = None) -> list[Fault]:
+        """The operator's list (``faultledger list``, the dashboard): ``list_faults``
+        without the shelved faults (``shelved="only"``: only them; ``"show"``: all),
+        unacknowledged faults first. ``list_faults`` stays medkit's list."""
+        now_ns = time.time_ns() if now is None else aware_ns(now, "now")
+        try:
+            return attention.triage(self.list_faults(statuses, severity), now_ns, shelved)
+        except ValueError as error:
+            raise InvalidInputError(str(error)) from None
+
     def all_faults(self) -> list[Fault]:
         return sorted(self._faults(), key=lambda f: f.fault_code)
 
