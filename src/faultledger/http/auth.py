@@ -33,6 +33,7 @@ _WHAT = {
     Permission.READ: "read",
     Permission.REPORT: "post reports",
     Permission.CLEAR: "clear faults",
+    Permission.ACKNOWLEDGE: "acknowledge or shelve faults",
     Permission.ADMINISTER: "administer the ledger",
     Permission.PUSH: "push a robot's log to the fleet central",
 }

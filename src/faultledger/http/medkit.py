@@ -68,7 +68,24 @@ def fault_item(fault: Fault) -> dict[str, Any]:
     }
     if fault.last_passed_ns:
         item["last_passed"] = seconds(fault.last_passed_ns)
+    item.update(attention(fault))
     return dict(sorted(item.items()))
+
+
+def attention(fault: Fault) -> dict[str, Any]:
+    """Ours, beyond medkit: who acknowledged the current episode and the shelving in force,
+    each only when there is one (so a fault nobody touched has the gateway's exact keys)."""
+    found: dict[str, Any] = {}
+    ack = fault.acknowledged
+    if ack is not None:
+        found["acknowledged"] = {"by": ack.actor, "at": seconds(ack.at_ns), "note": ack.note,
+                                 "seq": ack.seq}
+    shelf = fault.shelved
+    if shelf is not None:
+        found["shelved"] = {"by": shelf.actor, "at": seconds(shelf.at_ns),
+                            "until": seconds(shelf.until_ns), "reason": shelf.reason,
+                            "seq": shelf.seq}
+    return found
 
 
 def fault_list(faults: list[Fault]) -> dict[str, Any]:
@@ -96,7 +113,15 @@ def fault_detail(fault: Fault) -> dict[str, Any]:
                              # beyond medkit (x- keys are for extensions):
                              "first_occurred": seconds(fault.first_occurred_ns),
                              "last_occurred": seconds(fault.last_occurred_ns),
-                             "debounce_counter": fault.debounce_counter}
+                             "debounce_counter": fault.debounce_counter,
+                             # the episodes, from the log (medkit's first_occurred resets):
+                             "episode": fault.episode,
+                             "episode_started": seconds(fault.first_occurred_ns),
+                             "first_occurred_ever": seconds(fault.first_ever_ns
+                                                            or fault.first_occurred_ns),
+                             "occurrences_in_episode": fault.episode_failures,
+                             "occurrences_total": fault.total_failures,
+                             **attention(fault)}
     if fault.reporting_sources:
         extra["reporting_sources"] = list(fault.reporting_sources)
     if fault.last_passed_ns:

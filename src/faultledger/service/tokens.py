@@ -60,7 +60,7 @@ class Role(StrEnum):
     REPORTER = "reporter"
     """Posts reports and nothing else (a PLC gateway, a script)."""
     OPERATOR = "operator"
-    """Reads, reports, and clears faults."""
+    """Reads, reports, clears, acknowledges and shelves faults."""
     ADMIN = "admin"
     """Everything, including verify."""
     ROBOT = "robot"
@@ -72,6 +72,8 @@ class Permission(StrEnum):
     READ = "read"
     REPORT = "report"
     CLEAR = "clear"
+    ACKNOWLEDGE = "acknowledge"
+    """Acknowledge, shelve and unshelve (the operator's day)."""
     ADMINISTER = "administer"
     PUSH = "push"
 
@@ -79,7 +81,8 @@ class Permission(StrEnum):
 GRANTS: dict[Role, frozenset[Permission]] = {
     Role.VIEWER: frozenset({Permission.READ}),
     Role.REPORTER: frozenset({Permission.REPORT}),
-    Role.OPERATOR: frozenset({Permission.READ, Permission.REPORT, Permission.CLEAR}),
+    Role.OPERATOR: frozenset({Permission.READ, Permission.REPORT, Permission.CLEAR,
+                              Permission.ACKNOWLEDGE}),
     Role.ADMIN: frozenset(Permission),
     Role.ROBOT: frozenset({Permission.PUSH}),
 }

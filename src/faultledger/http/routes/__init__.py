@@ -9,7 +9,16 @@ from faultledger.http.context import Context
 
 def register(app: FastAPI, context: Context) -> None:
     from faultledger.http import dashboard
-    from faultledger.http.routes import audit, faults, fleet, metrics, reports, stats, system
+    from faultledger.http.routes import (
+        audit,
+        faults,
+        fleet,
+        metrics,
+        operator,
+        reports,
+        stats,
+        system,
+    )
 
-    for module in (faults, reports, audit, stats, metrics, system, fleet, dashboard):
+    for module in (faults, operator, reports, audit, stats, metrics, system, fleet, dashboard):
         app.include_router(module.router(context))

@@ -7,6 +7,7 @@ import asyncio
 import json
 import logging
 import threading
+import time
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Header, Path, Query, Request, Response
@@ -14,6 +15,7 @@ from sse_starlette import EventSourceResponse, ServerSentEvent
 from sse_starlette.sse import SendTimeoutError
 from starlette.types import Message, Receive, Scope, Send
 
+from faultledger.domain.attention import SHELVED_VIEWS, triage
 from faultledger.domain.fault import Fault
 from faultledger.domain.fleet import robot_id_error
 from faultledger.domain.types import FaultStatus
@@ -50,6 +52,9 @@ def statuses(status: str | None) -> tuple[FaultStatus, ...]:
     return found
 
 
+ShelvedQuery = Annotated[str, Query(
+    description="show (medkit's list: every fault, a shelved one marked with `shelved`), "
+    "hide (the operator's view: shelved faults left out) or only")]
 RobotQuery = Annotated[str | None, Query(
     description="a robot's faults as this fleet central holds its log(s); each item adds "
     "robot_id and ledger_id")]
@@ -105,13 +110,14 @@ class ListCache:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._seq = -1
-        self._content: dict[tuple[FaultStatus, ...], bytes] = {}
+        self._content: dict[tuple[tuple[FaultStatus, ...], str], bytes] = {}
 
-    def get(self, seq: int, wanted: tuple[FaultStatus, ...]) -> bytes | None:
+    def get(self, seq: int, wanted: tuple[tuple[FaultStatus, ...], str]) -> bytes | None:
         with self._lock:
             return self._content.get(wanted) if seq == self._seq else None
 
-    def put(self, seq: int, wanted: tuple[FaultStatus, ...], content: bytes) -> None:
+    def put(self, seq: int, wanted: tuple[tuple[FaultStatus, ...], str], content: bytes
+            ) -> None:
         with self._lock:
             if seq != self._seq:
                 self._seq, self._content = seq, {}
@@ -194,20 +200,26 @@ def router(context: Context) -> APIRouter:
              response_model=None, responses={200: {"content": {"application/json": {}}}})
     def list_faults(request: Request, status: StatusQuery = None, include_muted: bool = False,
                     include_clusters: bool = False, robot: RobotQuery = None,
-                    _: Principal = read) -> Response:
+                    shelved: ShelvedQuery = "show", _: Principal = read) -> Response:
         wanted = statuses(status)
+        if shelved not in SHELVED_VIEWS:
+            raise ApiError(Reason.INVALID, "Invalid shelved parameter value",
+                           parameters={"allowed_values": ", ".join(SHELVED_VIEWS),
+                                       "parameter": "shelved", "value": shelved})
         if robot is not None:
             return robot_faults(context, robot, wanted)
         seq = ledger.last_seq
-        etag = f'"{seq}-{status or "default"}"'
+        etag = f'"{seq}-{status or "default"}-{shelved}"'
         if request.headers.get("if-none-match") == etag:
             return Response(status_code=304, headers={"ETag": etag})
-        content = cache.get(seq, wanted)
+        content = cache.get(seq, (wanted, shelved))
         if content is None:
-            content = json.dumps(medkit.fault_list(
-                [f for f in ledger.all_faults() if f.status in wanted]),
-                separators=(",", ":")).encode()
-            cache.put(seq, wanted, content)
+            chosen = [f for f in ledger.all_faults() if f.status in wanted]
+            if shelved != "show":  # the operator's view keeps the code order here
+                chosen = sorted(triage(chosen, time.time_ns(), shelved),
+                                key=lambda f: f.fault_code)
+            content = json.dumps(medkit.fault_list(chosen), separators=(",", ":")).encode()
+            cache.put(seq, (wanted, shelved), content)
         return Response(content, media_type="application/json", headers={"ETag": etag})
 
     @api.get("/faults/{fault_code}", summary="One fault in any status (SOVD shape)")
