@@ -86,6 +86,7 @@ class TestOneSharedManager:
             f"{NS}/get_history": "faultledger_msgs/srv/GetHistory",
             f"{NS}/report_fault_once": "faultledger_msgs/srv/ReportFaultOnce",
             f"{NS}/report_goal_outcome": "faultledger_msgs/srv/ReportGoalOutcome",
+            f"{NS}/acknowledge_fault": "faultledger_msgs/srv/AcknowledgeFault",
         }
 
         def graph_complete() -> bool:

@@ -19,7 +19,13 @@ from collections.abc import Callable, Coroutine
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-from faultledger_msgs.srv import GetHistory, GetStatistics, ReportFaultOnce, ReportGoalOutcome
+from faultledger_msgs.srv import (
+    AcknowledgeFault,
+    GetHistory,
+    GetStatistics,
+    ReportFaultOnce,
+    ReportGoalOutcome,
+)
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -189,6 +195,9 @@ class FaultManagerNode:
         self.clear_service = node.create_service(
             ClearFault, "~/clear_fault", write(self.clear_fault, "clear_fault"),
             qos_profile=SERVICE_QOS)
+        self.acknowledge_service = node.create_service(
+            AcknowledgeFault, "~/acknowledge_fault",
+            write(self.acknowledge_fault, "acknowledge_fault"), qos_profile=SERVICE_QOS)
         # Reads: a reentrant group, so a read awaiting the pool holds up neither the reports
         # (the node's default, mutually exclusive group) nor other reads.
         self.read_group = ReentrantCallbackGroup()
@@ -201,7 +210,7 @@ class FaultManagerNode:
             (GetStatistics, "get_statistics", self.get_statistics),
         ]
         self.services = [self.report_service, self.report_once_service, self.goal_service,
-                         self.clear_service, *(
+                         self.clear_service, self.acknowledge_service, *(
             node.create_service(kind, f"~/{name}",
                                 self.reads.offload(guard_service(callback, self.log, name)),
                                 qos_profile=SERVICE_QOS, callback_group=self.read_group)
@@ -335,6 +344,17 @@ class FaultManagerNode:
         response.success = result.success
         response.message = result.message
         response.auto_cleared_codes = []
+        return response
+
+    def acknowledge_fault(self, request: Any, response: Any) -> Any:
+        result = self.ledger.acknowledge(request.fault_code,
+                                         actor=request.actor or "ros:acknowledge_fault",
+                                         note=request.note)
+        response.success = result.success
+        response.recorded = result.seq is not None
+        response.episode = 0 if result.fault is None or not result.success else (
+            result.fault.episode)
+        response.message = result.message
         return response
 
     def list_faults_for_entity(self, request: Any, response: Any) -> Any:
