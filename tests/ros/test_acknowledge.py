@@ -4,7 +4,7 @@ the medkit events topic carries no event type a medkit subscriber does not know.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from faultledger_msgs.srv import AcknowledgeFault
 
@@ -16,7 +16,7 @@ if TYPE_CHECKING:
 NS = "/fault_manager"
 
 
-def acknowledge(ros: RosClient, code: str, actor: str = "", note: str = "") -> object:
+def acknowledge(ros: RosClient, code: str, actor: str = "", note: str = "") -> Any:
     return ros.call(AcknowledgeFault, f"{NS}/acknowledge_fault",
                     AcknowledgeFault.Request(fault_code=code, actor=actor, note=note))
 
