@@ -15,7 +15,7 @@ const HISTORY_PAGE = 100;
 const state = {
   token: sessionStorage.getItem("faultledger-token") || "",
   faults: new Map(), filter: "", lastEventId: null, selected: null, streaming: false,
-  robot: "", robotFaults: new Map(), view: "faults", started: false,
+  robot: "", robotFaults: new Map(), view: "faults", started: false, shelvedOnly: false,
 };
 const $ = (id) => document.getElementById(id);
 
@@ -138,8 +138,11 @@ function faultRow(fault) {
   const key = faultKey(fault);
   const code = el("td", fault.fault_code);
   if (fault.ledger_id && logsOf(fault.robot_id).length > 1) code.appendChild(el("span", `log ${fault.ledger_id.slice(0, 8)}…`, "ledger"));
+  const ack = fault.acknowledged
+    ? el("td", `✓ ${fault.acknowledged.by}`, "text acked")
+    : cell(fault.status === "CLEARED" ? "–" : el("span", "new", "unacked"));
   const tr = row([
-    code, cell(statusBadge(fault.status)), cell(severityBadge(fault.severity_label)),
+    code, cell(statusBadge(fault.status)), cell(severityBadge(fault.severity_label)), ack,
     el("td", fault.description, "text wide"), fault.occurrence_count,
     when(fault.last_occurred), el("td", fault.reporting_sources.join(", "), "text wide"),
   ]);
@@ -150,11 +153,16 @@ function faultRow(fault) {
   return tr;
 }
 
+/** Shelved and not yet expired (an expired shelving no longer hides, before its record). */
+function isShelved(fault) { return Boolean(fault.shelved) && fault.shelved.until * 1000 > Date.now(); }
+
 function renderFaults(changed) {
   const wanted = GROUPS[state.filter];
   const all = state.robot ? state.robotFaults : state.faults;
-  const shown = [...all.values()].filter((f) => wanted.includes(f.status))
-    .sort((a, b) => (ORDER[a.status] - ORDER[b.status]) || (b.last_occurred - a.last_occurred));
+  // The operator's view: shelved faults hidden (or only them), unacknowledged ones first.
+  const shown = [...all.values()].filter((f) => wanted.includes(f.status) && isShelved(f) === state.shelvedOnly)
+    .sort((a, b) => (Boolean(a.acknowledged) - Boolean(b.acknowledged))
+      || (ORDER[a.status] - ORDER[b.status]) || (b.last_occurred - a.last_occurred));
   const body = $("fault-table").tBodies[0];
   body.replaceChildren(...shown.map(faultRow));
   $("no-faults").hidden = shown.length > 0;
@@ -258,6 +266,7 @@ function selectFault(code) {
   $("detail-description").textContent = "";
   $("detail-fields").replaceChildren();
   $("clear-message").textContent = "";
+  $("operator-message").textContent = "";
   Object.assign(detail, { code, records: [], total: null, before: null, refreshing: false });
   renderDetailHistory();
   queueDetail(loadDetailFields);
@@ -291,12 +300,21 @@ async function loadDetailFields(code) {
     };
     add("status", `${x.status_raw} (${status.aggregatedStatus}; testFailed ${status.testFailed}, confirmedDTC ${status.confirmedDTC}, pendingDTC ${status.pendingDTC})`);
     add("severity", severityBadge(x.severity_label));
-    add("occurrences", String(x.occurrence_count));
-    add("first occurred", when(x.first_occurred, true));
+    add("episode", `${x.episode}, since ${when(x.episode_started, true)}`);
+    add("first occurred ever", when(x.first_occurred_ever, true));
+    add("occurrences", `${x.occurrences_in_episode} in this episode, ${x.occurrences_total} in total (FAILED reports)`);
     add("last occurred", when(x.last_occurred, true));
     add("last passed", when(x.last_passed, true));
     add("sources", (x.reporting_sources || []).join(", ") || "–");
-    $("clear-form").hidden = document.body.dataset.readOnly === "true" || x.status_raw === "CLEARED";
+    const ack = x.acknowledged;
+    add("acknowledged", ack ? `${when(ack.at, true)} by ${ack.by}${ack.note ? `: ${ack.note}` : ""}` : "not yet");
+    const shelf = x.shelved && x.shelved.until * 1000 > Date.now() ? x.shelved : null;
+    if (shelf) add("shelved", `by ${shelf.by} until ${when(shelf.until, true)}${shelf.reason ? `: ${shelf.reason}` : ""}`);
+    const readOnly = document.body.dataset.readOnly === "true";
+    $("clear-form").hidden = readOnly || x.status_raw === "CLEARED";
+    $("ack-form").hidden = readOnly || Boolean(ack) || x.status_raw === "CLEARED";
+    $("shelve-form").hidden = readOnly || Boolean(shelf);
+    $("unshelve-form").hidden = readOnly || !shelf;
   } catch (error) {
     if (detail.code === code) showError("detail-description", error);
   }
@@ -371,6 +389,35 @@ function closeDetail() {
 }
 $("detail-close").addEventListener("click", () => { closeDetail(); renderFaults(); });
 $("status-filter").addEventListener("change", (event) => { state.filter = event.target.value; renderFaults(); });
+$("shelved-filter").addEventListener("change", (event) => { state.shelvedOnly = event.target.checked; renderFaults(); });
+
+/** POST an operator action for the selected fault; the stream brings the change back. */
+async function operate(action, body, done) {
+  const message = $("operator-message");
+  message.textContent = "";
+  try {
+    await apiJson(`/api/v1/faults/${encodeURIComponent(state.selected)}/${action}`, {
+      method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body),
+    });
+    if (done) done();
+    refreshDetail();
+  } catch (error) {
+    showError("operator-message", error);
+  }
+}
+$("ack-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  operate("ack", { note: $("ack-note").value }, () => { $("ack-note").value = ""; });
+});
+$("shelve-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  operate("shelve", { for: $("shelve-for").value, reason: $("shelve-reason").value },
+    () => { $("shelve-reason").value = ""; });
+});
+$("unshelve-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  operate("unshelve", {});
+});
 $("clear-form").addEventListener("submit", async (event) => {
   event.preventDefault();
   const message = $("clear-message");
@@ -745,6 +792,7 @@ function showRobotFault(fault) {
   add("last passed", when(fault.last_passed, true));
   add("sources", fault.reporting_sources.join(", ") || "–");
   $("clear-form").hidden = true;
+  for (const id of ["ack-form", "shelve-form", "unshelve-form"]) $(id).hidden = true;
   $("clear-message").textContent = "";
   $("detail-history-part").hidden = true;
   $("detail-robot-note").hidden = false;
