@@ -113,7 +113,8 @@ def test_the_detail_shows_the_newest_records_first_and_pages_backwards(
     assert seqs(browser, "detail-history") == mine[:50]  # the first row is the newest seq
     assert text(browser, "detail-count") == "50 newest of 300 records"
     fields = text(browser, "detail-fields")
-    assert "first occurred\n2026-11-20 13:00:00 CET" in fields
+    assert "first occurred ever\n2026-11-20 13:00:00 CET" in fields
+    assert "episode\n1, since 2026-11-20 13:00:00 CET" in fields
     assert "last occurred\n2026-11-21 13:55:00 CET" in fields
     first_row = browser.find_element(By.CSS_SELECTOR, "#detail-history tbody tr").text
     assert first_row.startswith(f"{mine[0]} 2026-11-21 13:55:00 FAILED")
