@@ -14,6 +14,7 @@ import typer
 from faultledger.cli import anchor as anchor_commands
 from faultledger.cli import audit, render
 from faultledger.cli import fleet as fleet_commands
+from faultledger.cli import policy as policy_commands
 from faultledger.cli import stats as stats_commands
 from faultledger.cli import web as web_commands
 from faultledger.cli.options import (
@@ -274,6 +275,8 @@ anchor_commands.register(app)
 web_commands.register(app)
 # sync: push this robot's log to a fleet central, in cli/fleet.py.
 fleet_commands.register(app)
+# policy explain: the debounce fields of one report and their rules, in cli/policy.py.
+policy_commands.register(app)
 
 
 @app.command()
