@@ -191,7 +191,8 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, args: tuple[str, ...],
                                           words: str) -> None:
     config = write(tmp_path, CONFLICTING)
 
-    result = invoke("policy", "explain", *args, "--config", str(config))
+    result = invoke("policy", "explain", *args, "--config", str(config), "--db",
+                    str(tmp_path / "missing.db"))  # the input is checked first
 
     assert result.exit_code == 2
     assert_clean_error(result, words)

@@ -27,7 +27,7 @@ from faultledger.domain.fault import Fault
 from faultledger.domain.policy_explain import shown_value
 from faultledger.errors import FaultLedgerError
 from faultledger.service.config import config_path
-from faultledger.service.policy_check import PolicyAnswer, answer
+from faultledger.service.policy_check import PolicyAnswer, answer, explain_report
 
 policy_app = typer.Typer(help="The debounce policy of the configuration.", no_args_is_help=True,
                          rich_markup_mode=HELP_MARKUP)
@@ -61,6 +61,10 @@ def policy_explain(
     reporting source (the counter is shared per code; medkit #276).
     """
     settings = settings_for(config)
+    try:
+        explain_report(settings.policy, source, fault_code)  # bad input: before any database
+    except FaultLedgerError as error:
+        fail(str(error))
     faults: list[Fault] | None = None
     if db is not None:
         with opened(prepare(db, config)) as ledger:
