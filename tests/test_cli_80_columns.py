@@ -235,7 +235,8 @@ def test_wide_shows_every_column(scenario: Scenario) -> None:
 
 # -- --help --------------------------------------------------------------------------------------
 HELP = [(), ("list",), ("show",), ("history",), ("verify",), ("state-at",), ("stats",),
-        ("report-shift",), ("demo",), ("report",), ("anchor",), ("db",), ("token", "create")]
+        ("report-shift",), ("demo",), ("report",), ("anchor",), ("db",), ("token", "create"),
+        ("policy",), ("policy", "explain")]
 
 
 @pytest.mark.parametrize("command", HELP, ids=lambda c: " ".join(c) or "faultledger")

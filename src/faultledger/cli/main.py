@@ -14,6 +14,7 @@ from faultledger.cli import anchor as anchor_commands
 from faultledger.cli import audit, render
 from faultledger.cli import fleet as fleet_commands
 from faultledger.cli import operator as operator_commands
+from faultledger.cli import policy as policy_commands
 from faultledger.cli import stats as stats_commands
 from faultledger.cli import web as web_commands
 from faultledger.cli.options import (
@@ -282,6 +283,8 @@ web_commands.register(app)
 fleet_commands.register(app)
 # ack, shelve, unshelve: the operator's day, in cli/operator.py.
 operator_commands.register(app)
+# policy explain: the debounce fields of one report and their rules, in cli/policy.py.
+policy_commands.register(app)
 
 
 @app.command()

@@ -23,6 +23,7 @@ from faultledger.service import times
 from faultledger.service.bootstrap import LedgerConfig, Role, open_ledger, resolve
 from faultledger.service.config import Settings, config_path, load_settings
 from faultledger.service.ledger import FaultLedger
+from faultledger.service.policy_check import config_warnings
 
 __all__ = [
     "HELP_MARKUP",
@@ -99,12 +100,20 @@ def settings_for(config: Path | None) -> Settings:
 def prepare(db: str | None, config: Path | None, role: Role = Role.READER, *,
             shifts: Path | None = None) -> LedgerConfig:
     """The command's ledger configuration (database URL, policy, calendar) by the precedence
-    of docs/configuration.md; a bad config, calendar or database URL is exit 2."""
+    of docs/configuration.md; a bad config, calendar or database URL is exit 2. A writer that
+    records the config's policy warns of its conflicts on stderr (docs/configuration.md,
+    "Explaining the policy")."""
     try:
-        return resolve(load_settings(config_path(config)), role, db=db, shifts=shifts,
-                       config_given=config is not None)
+        resolved = resolve(load_settings(config_path(config)), role, db=db, shifts=shifts,
+                           config_given=config is not None)
     except FaultLedgerError as error:
         fail(str(error))
+    if role is Role.WRITER and resolved.policy is not None:
+        # The command records the config's policy: say where it makes a code's thresholds
+        # depend on the reporting source (serving processes warn when they open the ledger).
+        for warning in config_warnings(resolved.policy):
+            render.warn(warning)
+    return resolved
 
 
 @contextmanager

@@ -475,19 +475,25 @@ def describe_url(url: str) -> str:
 
 
 # -- output --------------------------------------------------------------------------------------
-def note(message: str) -> None:
+def note(message: str, label: str = "note:") -> None:
     """``note: …`` on stderr: on a terminal wrapped at spaces (never inside a time), indented
     under its first line; piped, one line (scripts grep it whole)."""
     err = Console(stderr=True, highlight=False, soft_wrap=True)
     if not err.is_terminal:
-        complain("note:", message)
+        complain(label, message)
         return
-    lines = wrap("note: " + printable(message), err.width)
+    lines = wrap(f"{label} {printable(message)}", err.width)
     first, rest = lines[0], lines[1:]
-    label, _, head = first.partition(" ")
+    head = first[len(label) + 1:]
+    indent = " " * (len(label) + 1)
     err.print(Text.assemble((label, "bold yellow"), " ", head))
-    for line in wrap(" ".join(rest), err.width - 6) if rest else []:
-        err.print(Text("      " + line))
+    for line in wrap(" ".join(rest), err.width - len(indent)) if rest else []:
+        err.print(Text(indent + line))
+
+
+def warn(message: str) -> None:
+    """``warning: …`` on stderr, laid out as ``note`` lays out its notes."""
+    note(message, "warning:")
 
 
 def complain(label: str, message: str) -> None:

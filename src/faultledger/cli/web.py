@@ -9,6 +9,7 @@ from typing import Annotated
 
 import typer
 
+from faultledger.cli import render
 from faultledger.cli.options import (
     HELP_MARKUP,
     ConfigOption,
@@ -23,6 +24,7 @@ from faultledger.cli.tokens import PICKUP, token_file, token_list, token_revoke
 from faultledger.errors import FaultLedgerError
 from faultledger.service.bootstrap import Role, open_ledger
 from faultledger.service.config import TOKEN_NAME_RULE
+from faultledger.service.policy_check import startup_warnings
 from faultledger.service.tokens import check_name, check_role, issue, parse_lifetime, utc_text
 from faultledger.store.database import describe
 
@@ -61,6 +63,9 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
         fail(str(error))
     pusher: PusherThread | None = None
     try:
+        if not read_only:  # the writer beside a read-only server warns of its own policy
+            for warning in startup_warnings(ledger):
+                render.warn(warning)
         try:
             server = HttpServer(ledger, settings.http, ledger_config.calendar, listen,
                                 read_only=read_only,

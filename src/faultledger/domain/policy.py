@@ -115,24 +115,37 @@ class Policy(BaseModel):
             self.confirmation_threshold, self.healing_enabled, self.healing_threshold
         )
 
-    def override_for(self, source_id: str) -> SourceOverride | None:
-        """Longest prefix equal to source_id or followed in it by '/' ("/a/b" covers "/a/b/c")."""
-        for prefix, override in self._by_length:
+    def prefix_for(self, source_id: str) -> str | None:
+        """The source prefix whose override applies to ``source_id``: the longest one equal
+        to it or followed in it by '/' ("/a/b" covers "/a/b/c"); None: no prefix matches."""
+        for prefix, _ in self._by_length:
             if source_id == prefix or (
                 source_id.startswith(prefix) and source_id[len(prefix)] == "/"
             ):
-                return override
+                return prefix
         return None
+
+    def pattern_for(self, fault_code: str) -> str | None:
+        """The most specific code pattern matching ``fault_code``; None: no pattern does."""
+        for pattern, _ in self._by_specificity:
+            if fnmatchcase(fault_code, pattern):
+                return pattern
+        return None
+
+    def override_for(self, source_id: str) -> SourceOverride | None:
+        """The override of ``prefix_for(source_id)``, if any."""
+        prefix = self.prefix_for(source_id)
+        return None if prefix is None else self.overrides[prefix]
 
     def code_override_for(self, fault_code: str) -> SourceOverride | None:
-        """The most specific code pattern matching ``fault_code``, if any."""
-        for pattern, override in self._by_specificity:
-            if fnmatchcase(fault_code, pattern):
-                return override
-        return None
+        """The override of ``pattern_for(fault_code)``, if any."""
+        pattern = self.pattern_for(fault_code)
+        return None if pattern is None else self.code_overrides[pattern]
 
     def resolve(self, source_id: str, fault_code: str = "") -> DebounceParams:
-        """Global values, then the code pattern's fields, then the source prefix's fields."""
+        """Global values, then the code pattern's fields, then the source prefix's fields.
+        ``domain.policy_explain.explain`` says the same per field, naming the rule that gave
+        each (a property test keeps the two equal)."""
         key = (source_id, fault_code) if self.code_overrides else source_id
         cached = self._resolved.get(key)
         if cached is not None:

@@ -36,6 +36,7 @@ from faultledger.service.anchors import AnchorScheduler
 from faultledger.service.bootstrap import Role, open_ledger, resolve
 from faultledger.service.config import Settings
 from faultledger.service.ledger import FaultLedger
+from faultledger.service.policy_check import startup_warnings
 from faultledger.store.database import describe
 
 
@@ -266,6 +267,10 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
                          policy=None if follower else policy, shifts=settings.shifts)
         url = config.url
         ledger = open_ledger(config)
+        if not follower:  # where the policy in force makes a code's thresholds depend on the
+            # reporting source (medkit #276); the manager a follower follows warns of its own
+            for warning in startup_warnings(ledger):
+                node.get_logger().warning(warning)
         # A follower writes nothing: no anchors, no bridges (the manager it follows runs them).
         anchors = None if follower else AnchorScheduler.from_settings(ledger, settings.anchors)
         if anchors is not None:
