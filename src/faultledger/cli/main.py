@@ -212,9 +212,9 @@ def show(
     db: DbOption = None,
     config: ConfigOption = None,
 ) -> None:
-    """Show one fault, its episode, acknowledgement, shelving, transitions and last clear.
+    """Show one fault: episode, acknowledgement, transitions.
 
-    Any status, also CLEARED; the first occurrence ever and the current episode's start;
+    Its shelving and last clear too. Any status, also CLEARED; the first occurrence ever and the current episode's start;
     who acknowledged and who cleared it last, and why.
     """
     setup = prepare(db, config, shifts=shifts)

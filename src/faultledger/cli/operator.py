@@ -38,7 +38,7 @@ def ack(fault_code: CodeArgument,
         note: Annotated[str, typer.Option(
             "--note", metavar="TEXT", help="What you saw or did, for the shift handover.")] = "",
         actor: ActorOption = None, db: DbOption = None, config: ConfigOption = None) -> None:
-    """Acknowledge a fault: you have seen its current episode (the status stays).
+    """Acknowledge a fault's current episode (its status stays).
 
     A new episode (the fault comes back after a clear) needs a new acknowledgement; a second
     acknowledgement of one episode records nothing and says who was first.
@@ -55,9 +55,9 @@ def shelve(fault_code: CodeArgument,
            reason: Annotated[str, typer.Option(
                "--reason", metavar="TEXT", help="Why it is a known nuisance.")] = "",
            actor: ActorOption = None, db: DbOption = None, config: ConfigOption = None) -> None:
-    """Shelve a fault: hide it from `list`, the dashboard and alerts for a while.
+    """Hide a known nuisance from lists and alerts for a while.
 
-    Its status and counts go on; `list --shelved` shows it. The serving process records
+    Shelving leaves it out of `list`, the dashboard and alerts. Its status and counts go on; `list --shelved` shows it. The serving process records
     the end when the time is up; shelving a shelved fault sets a new end.
     """
     with opened(prepare(db, config, Role.WRITER)) as ledger:
