@@ -54,9 +54,21 @@ class Timer:
 
 
 @dataclass(frozen=True)
+class Operator:
+    """An acknowledgement, shelving (for ``duration`` seconds) or unshelving."""
+
+    action: str
+    code: str
+    seconds: int
+    duration: int = 0
+
+
+@dataclass(frozen=True)
 class Reopen:
     pass
 
+
+Op = Report | Clear | Timer | Operator | Reopen
 
 reports = st.builds(Report, st.sampled_from(CODES), st.sampled_from(["FAILED", "PASSED"]),
                     st.integers(0, 3), st.sampled_from(SOURCES), st.integers(0, 20))
@@ -65,6 +77,8 @@ operations = st.lists(
         reports, reports, reports,
         st.builds(Clear, st.sampled_from(CODES), st.integers(0, 20)),
         st.builds(Timer, st.integers(0, 20)),
+        st.builds(Operator, st.sampled_from(["ack", "shelve", "unshelve"]),
+                  st.sampled_from(CODES), st.integers(0, 20), st.integers(1, 10)),
         st.just(Reopen()),
     ),
     max_size=40,
@@ -78,12 +92,19 @@ def _db(fresh_url: Callable[[str], str]) -> str:
     return fresh_url(f"p{next(_files)}")
 
 
-def _drive(ledger: FaultLedger, op: Report | Clear | Timer, now: datetime) -> None:
+def _drive(ledger: FaultLedger, op: Report | Clear | Timer | Operator, now: datetime) -> None:
     if isinstance(op, Report):
         result = ledger.report(op.code, op.event_type, op.severity, "", op.source, at=now)
         assert result.accepted, result.message
     elif isinstance(op, Clear):
         ledger.clear(op.code, actor="test", at=now)
+    elif isinstance(op, Operator):
+        if op.action == "ack":
+            ledger.acknowledge(op.code, "test", at=now)
+        elif op.action == "shelve":
+            ledger.shelve(op.code, op.duration, "test", at=now)
+        else:
+            ledger.unshelve(op.code, "test", at=now)
     else:
         ledger.run_timers(now)
 
@@ -99,7 +120,7 @@ DB_SETTINGS = settings(max_examples=25, deadline=None,
 @DB_SETTINGS
 @given(policy=policies, ops=operations)
 def test_reopening_restores_exactly_the_state_before_closing(
-    fresh_url: Callable[[str], str], policy: Policy, ops: list[Report | Clear | Timer | Reopen]
+    fresh_url: Callable[[str], str], policy: Policy, ops: list[Op]
 ) -> None:
     url = _db(fresh_url)
     now = T0
@@ -124,7 +145,7 @@ def test_reopening_restores_exactly_the_state_before_closing(
 @DB_SETTINGS
 @given(policy=policies, ops=operations)
 def test_incremental_projection_equals_full_replay(
-    fresh_url: Callable[[str], str], policy: Policy, ops: list[Report | Clear | Timer | Reopen]
+    fresh_url: Callable[[str], str], policy: Policy, ops: list[Op]
 ) -> None:
     now = T0
     with FaultLedger.open(_db(fresh_url), policy=policy, background=False) as ledger:
@@ -145,7 +166,7 @@ def test_incremental_projection_equals_full_replay(
 @given(policy=policies, ops=operations, data=st.data())
 def test_state_at_seq_equals_replay_of_the_first_n_records(
     fresh_url: Callable[[str], str], policy: Policy,
-    ops: list[Report | Clear | Timer | Reopen], data: st.DataObject
+    ops: list[Op], data: st.DataObject
 ) -> None:
     now = T0
     snapshots: dict[int, list[Fault]] = {}

@@ -214,8 +214,8 @@ def show(
 ) -> None:
     """Show one fault: episode, acknowledgement, transitions.
 
-    Its shelving and last clear too. Any status, also CLEARED; the first occurrence ever and the current episode's start;
-    who acknowledged and who cleared it last, and why.
+    Its shelving and last clear too. Any status, also CLEARED; the first occurrence ever
+    and the current episode's start; who acknowledged and who cleared it last, and why.
     """
     setup = prepare(db, config, shifts=shifts)
     calendar = setup.calendar

@@ -57,8 +57,9 @@ def shelve(fault_code: CodeArgument,
            actor: ActorOption = None, db: DbOption = None, config: ConfigOption = None) -> None:
     """Hide a known nuisance from lists and alerts for a while.
 
-    Shelving leaves it out of `list`, the dashboard and alerts. Its status and counts go on; `list --shelved` shows it. The serving process records
-    the end when the time is up; shelving a shelved fault sets a new end.
+    Shelving leaves it out of `list`, the dashboard and alerts. Its status and counts go
+    on; `list --shelved` shows it. The serving process records the end when the time is
+    up; shelving a shelved fault sets a new end.
     """
     with opened(prepare(db, config, Role.WRITER)) as ledger:
         result = ledger.shelve(fault_code, duration, actor or f"cli:{user()}", reason)
