@@ -18,9 +18,12 @@ import pytest
 
 from faultledger.domain.clock import to_ns
 from faultledger.domain.events import (
+    FaultAcknowledged,
     FaultCleared,
     FaultConfirmedByTimer,
     FaultReported,
+    FaultShelved,
+    FaultUnshelved,
     GoalOutcome,
     LogRecord,
     ReclassifiedOnStartup,
@@ -45,7 +48,8 @@ ESTOP_GLOB = "HW_*_EMERGENCY_STOP"
 """The default ``estop_codes``."""
 FIGURES = (*COUNTS, "estops", "active_seconds", "repairs", "mttr_seconds", "mtbf_seconds",
            "confirmations_per_10min", "flood_windows", "flood_seconds", "flood_percent",
-           "chattering_codes", "stale_codes", "top10_share", *GOAL_COUNTS.values())
+           "chattering_codes", "stale_codes", "top10_share", *GOAL_COUNTS.values(),
+           "acknowledgements", "mtta_seconds", "shelved_seconds")
 
 
 # -- facts and episodes ---------------------------------------------------------------------------
@@ -94,11 +98,42 @@ class Goal:
     server_node: str
 
 
+@dataclass(frozen=True)
+class Ack:
+    """An acknowledgement that took effect, and how long after the episode's first
+    confirmation it came (None: the episode was not confirmed before it)."""
+
+    code: str
+    source: str
+    severity: int
+    at_ns: int
+    delay_ns: int | None
+
+
+@dataclass
+class Shelf:
+    """A shelving: from its record to the next shelving or unshelving of the code; while
+    neither is recorded, to its expiry or as_of, whichever is first."""
+
+    code: str
+    source: str
+    severity: int
+    start_ns: int
+    until_ns: int
+    end_ns: int | None = None
+
+    def stop(self, as_of_ns: int) -> int:
+        end = min(as_of_ns, self.until_ns) if self.end_ns is None else self.end_ns
+        return max(self.start_ns, end)
+
+
 @dataclass
 class Folded:
     facts: list[Fact] = field(default_factory=list)
     episodes: list[Episode] = field(default_factory=list)
     goals: list[Goal] = field(default_factory=list)
+    acks: list[Ack] = field(default_factory=list)
+    shelves: list[Shelf] = field(default_factory=list)
 
 
 def _source(record: LogRecord) -> str:
@@ -122,10 +157,33 @@ def fold(records: Iterable[LogRecord]) -> Folded:
     previous_report_failed: dict[str, bool] = {}
     activation_times: dict[str, list[int]] = {}
     open_episode: dict[str, Episode] = {}
+    first_confirmed: dict[str, int] = {}
+    """Per code: the first confirmation of its current episode (since creation/reopening)."""
+    open_shelf: dict[str, Shelf] = {}
     for record in records:
         code = record.fault_code
         before = projector.get(code) if code is not None else None
         projector.apply(record)
+        if isinstance(record.event, FaultAcknowledged | FaultShelved | FaultUnshelved):
+            after = projector.get(code) if code is not None else None
+            if before is None or after is None or after == before:
+                continue  # refused or no longer fitting: changes nothing, counts nothing
+            t = record.occurred_at_ns
+            operated = record.event
+            if isinstance(operated, FaultAcknowledged):
+                confirmed = first_confirmed.get(operated.fault_code)
+                delay = None if confirmed is None or t < confirmed else t - confirmed
+                out.acks.append(Ack(operated.fault_code, operated.actor, after.severity, t, delay))
+                continue
+            running = open_shelf.pop(operated.fault_code, None)
+            if running is not None:
+                running.end_ns = t
+            if isinstance(operated, FaultShelved):
+                shelf = Shelf(operated.fault_code, operated.actor, after.severity, t,
+                              operated.until_ns)
+                open_shelf[operated.fault_code] = shelf
+                out.shelves.append(shelf)
+            continue
         if isinstance(record.event, GoalOutcome):  # counted as it is, touches no fault
             goal = record.event
             out.goals.append(Goal(record.seq, record.occurred_at_ns, goal.action, goal.status,
@@ -177,6 +235,10 @@ def fold(records: Iterable[LogRecord]) -> Folded:
                     chattering=chattering)
         out.facts.append(fact)
 
+        if occurrence:
+            first_confirmed.pop(code, None)
+        if confirmation:
+            first_confirmed.setdefault(code, t)
         if was is FaultStatus.CONFIRMED and now is not FaultStatus.CONFIRMED:
             open_episode.pop(code).end_ns = t
         if confirmation:
@@ -284,14 +346,16 @@ def _selected(code: str, codes: Sequence[str] | None) -> bool:
     return codes is None or any(fnmatch.fnmatchcase(code, pattern) for pattern in codes)
 
 
-def _group_of(item: Fact | Episode, group_by: Sequence[str]) -> tuple[str | int, ...]:
+def _group_of(item: Fact | Episode | Ack | Shelf, group_by: Sequence[str]
+              ) -> tuple[str | int, ...]:
     values: dict[str, str | int] = {"code": item.code, "source": item.source,
                                      "severity": item.severity}
     return tuple(values[key] for key in group_by)
 
 
 def figures(period: RefPeriod, facts: Sequence[Fact], episodes: Sequence[Episode],
-            as_of_ns: int, goals: Sequence[Goal] = ()) -> dict[str, Any]:
+            as_of_ns: int, goals: Sequence[Goal] = (), acks: Sequence[Ack] = (),
+            shelves: Sequence[Shelf] = ()) -> dict[str, Any]:
     """Every figure of one row, from the facts, episodes and goals of that row's group."""
     ps, pe = period.start_ns, period.end_ns
     length = pe - ps
@@ -349,12 +413,30 @@ def figures(period: RefPeriod, facts: Sequence[Fact], episodes: Sequence[Episode
     row["top10_share"] = top / confirmations if confirmations else None
     for status, name in GOAL_COUNTS.items():
         row[name] = sum(1 for g in goals if ps <= g.at_ns < pe and g.status == status)
+    acked = [a for a in acks if ps <= a.at_ns < pe]
+    row["acknowledgements"] = len(acked)
+    delays = [a.delay_ns for a in acked if a.delay_ns is not None]
+    row["mtta_seconds"] = sum(delays) / len(delays) / NS if delays else None
+    row["shelved_seconds"] = sum(
+        max(0, min(pe, shelf.stop(as_of_ns)) - max(ps, shelf.start_ns)) for shelf in shelves) / NS
     return row
 
 
 def _nonzero(row: dict[str, Any]) -> bool:
-    return (any(row[name] for name in (*COUNTS, *GOAL_COUNTS.values()))
-            or row["active_seconds"] > 0 or row["repairs"] > 0 or row["stale_codes"] > 0)
+    return (any(row[name] for name in (*COUNTS, *GOAL_COUNTS.values(), "acknowledgements"))
+            or row["active_seconds"] > 0 or row["repairs"] > 0 or row["stale_codes"] > 0
+            or row["shelved_seconds"] > 0)
+
+
+@dataclass
+class Grouped:
+    """What one group of rows is counted from."""
+
+    facts: list[Fact] = field(default_factory=list)
+    episodes: list[Episode] = field(default_factory=list)
+    goals: list[Goal] = field(default_factory=list)
+    acks: list[Ack] = field(default_factory=list)
+    shelves: list[Shelf] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -378,22 +460,29 @@ def expected_rows(folded: Folded, periods: Sequence[RefPeriod], as_of: datetime,
     facts = [] if by_action else [f for f in folded.facts if _selected(f.code, codes)]
     episodes = [] if by_action else [e for e in folded.episodes if _selected(e.code, codes)]
     goals = folded.goals if by_action or not group_by else []
-    groups: dict[tuple[str | int, ...], tuple[list[Fact], list[Episode], list[Goal]]] = {}
+    acks = [] if by_action else [a for a in folded.acks if _selected(a.code, codes)]
+    shelves = [] if by_action else [x for x in folded.shelves if _selected(x.code, codes)]
+    groups: dict[tuple[str | int, ...], Grouped] = {}
     for f in facts:
-        groups.setdefault(_group_of(f, group_by), ([], [], []))[0].append(f)
+        groups.setdefault(_group_of(f, group_by), Grouped()).facts.append(f)
     for e in episodes:
-        groups.setdefault(_group_of(e, group_by), ([], [], []))[1].append(e)
+        groups.setdefault(_group_of(e, group_by), Grouped()).episodes.append(e)
     for g in goals:
         values = {"action": g.action, "source": g.server_node}
         goal_key: tuple[str | int, ...] = tuple(values[name] for name in group_by)
-        groups.setdefault(goal_key, ([], [], []))[2].append(g)
+        groups.setdefault(goal_key, Grouped()).goals.append(g)
+    for a in acks:
+        groups.setdefault(_group_of(a, group_by), Grouped()).acks.append(a)
+    for x in shelves:
+        groups.setdefault(_group_of(x, group_by), Grouped()).shelves.append(x)
     if not group_by:
-        groups.setdefault((), ([], [], []))
+        groups.setdefault((), Grouped())
     out: list[ExpectedRow] = []
     for period in periods:
         for key in sorted(groups):
-            group_facts, group_episodes, group_goals = groups[key]
-            row = figures(period, group_facts, group_episodes, as_of_ns, group_goals)
+            group = groups[key]
+            row = figures(period, group.facts, group.episodes, as_of_ns, group.goals,
+                          group.acks, group.shelves)
             if group_by and not _nonzero(row):
                 continue
             out.append(ExpectedRow(period, dict(zip(group_by, key, strict=True)), row))

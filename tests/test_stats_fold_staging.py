@@ -35,7 +35,8 @@ def state(projector: Projector) -> tuple[StatsOutput, dict[str, object]]:
     assert projector.stats is not None
     out = projector.stats.peek()
     return (StatsOutput(list(out.facts), list(out.started), list(out.ended), dict(out.tracks),
-                        list(out.goals)), dict(projector.stats.tracks()))
+                        list(out.goals), list(out.operator), list(out.shelf_ends)),
+            dict(projector.stats.tracks()))
 
 
 @given(before=REPORTS, group=REPORTS)
@@ -68,5 +69,5 @@ def test_a_rollback_after_a_take_in_the_group_drops_only_what_followed(
         projector.apply(record)
     projector.rollback()
     output, tracks = state(projector)
-    assert output == StatsOutput([], [], [], {}, [])
+    assert output == StatsOutput([], [], [], {}, [], [], [])
     assert tracks == tracks_before

@@ -172,7 +172,18 @@ class Burst:
     gap_s: int
 
 
-Op = Report | Clear | Timer | Goal | Jump | Restart | Burst
+@dataclass(frozen=True)
+class Operate:
+    """An acknowledgement, a shelving for ``minutes``, or an unshelving, by an actor."""
+
+    action: str
+    code: str
+    actor: str
+    minutes: int
+    when: When
+
+
+Op = Report | Clear | Timer | Goal | Jump | Restart | Burst | Operate
 
 steps = st.one_of(
     st.integers(0, 40).map(lambda s: s * US),          # chattering range
@@ -186,7 +197,8 @@ absolutes = st.sampled_from(("clock",) * 5 + ("boundary", "anywhere")).flatmap(
 whens = st.builds(When, steps, absolutes)
 reports = st.builds(Report, st.sampled_from(CODES), st.booleans(), st.integers(0, 3),
                     st.sampled_from(SOURCES), whens)
-KINDS = ("report",) * 14 + ("clear",) * 3 + ("goal",) * 4 + ("timer", "jump", "restart")
+KINDS = (("report",) * 14 + ("clear",) * 3 + ("goal",) * 4 + ("operate",) * 3
+         + ("timer", "jump", "restart"))
 """Weights of the operations (repeated branches of ``st.one_of`` would not weigh more)."""
 
 
@@ -200,6 +212,10 @@ def plain_ops(draw: st.DrawFn) -> Op:
         return draw(st.builds(Clear, st.sampled_from(CODES), st.sampled_from(ACTORS), whens))
     if kind == "timer":
         return draw(st.builds(Timer, whens))
+    if kind == "operate":
+        return draw(st.builds(Operate, st.sampled_from(["ack", "ack", "shelve", "unshelve"]),
+                              st.sampled_from(CODES), st.sampled_from(ACTORS),
+                              st.integers(1, 300), whens))
     if kind == "goal":
         return draw(st.builds(Goal, st.sampled_from(ACTIONS), st.sampled_from(GOAL_IDS),
                               st.sampled_from(GOAL_STATUSES), st.sampled_from(SERVERS), whens))
@@ -277,6 +293,13 @@ def built(ops: Sequence[Op], policy: int, base: datetime) -> Iterator[tuple[Faul
                         result = ledger.record_goal_outcome(op.action, op.goal_id, op.status,
                                                             op.server, at=at)
                         assert result.accepted, result.message
+                    elif isinstance(op, Operate):  # may be refused: it is then not counted
+                        if op.action == "ack":
+                            ledger.acknowledge(op.code, op.actor, at=at)
+                        elif op.action == "shelve":
+                            ledger.shelve(op.code, op.minutes * 60, op.actor, at=at)
+                        else:
+                            ledger.unshelve(op.code, op.actor, at=at)
                     else:
                         ledger.run_timers(at)
             yield ledger, url

@@ -172,6 +172,8 @@ class Projector:
         if self._saved is None:
             self.committed_seq = record.seq
         event = record.event
+        if isinstance(event, FaultAcknowledged | FaultShelved | FaultUnshelved):
+            return self._operated(record, event)
         effect = self._apply(record, event)
         if self.stats is not None:
             if isinstance(event, GoalOutcome):
@@ -179,6 +181,14 @@ class Projector:
             elif not isinstance(event, PolicyChanged | LedgerIdentified):
                 fault = effect.fault or self.get(event.fault_code)
                 self.stats.observe(record, effect.transition, fault)
+        return effect
+
+    def _operated(self, record: LogRecord,
+                  event: FaultAcknowledged | FaultShelved | FaultUnshelved) -> Effect:
+        before = self.get(event.fault_code)
+        effect = self._operator(record, event)
+        if self.stats is not None and effect.fault is not None and before is not None:
+            self.stats.observe_operator(record, event, before, effect.fault)
         return effect
 
     def apply_selected(self, record: LogRecord) -> Effect:
@@ -198,8 +208,6 @@ class Projector:
             return self._move(record, event.fault_code, FaultStatus.PREFAILED, "timer", "timer")
         if isinstance(event, ReclassifiedOnStartup):
             return self._move(record, event.fault_code, FaultStatus.HEALED, "startup", "startup")
-        if isinstance(event, FaultAcknowledged | FaultShelved | FaultUnshelved):
-            return self._operator(record, event)
         if isinstance(event, PolicyChanged):
             self.policy = Policy.model_validate(event.policy)
             self.policy_recorded = True

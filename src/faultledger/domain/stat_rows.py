@@ -57,6 +57,13 @@ class StatsRow:
     aborted_goals: int = 0
     canceled_goals: int = 0
     succeeded_goals: int = 0
+    acknowledgements: int = 0
+    """Acknowledgement records (docs/statistics.md, "The operator's day")."""
+    mtta_seconds: float | None = None
+    """Mean time to acknowledge: first confirmation of the episode → its acknowledgement,
+    over the acknowledgements in the period of episodes confirmed before them."""
+    shelved_seconds: float = 0.0
+    """Time the row's faults spent shelved in the period."""
     complete: bool | None = None
     """At a fleet central: False while a robot in the row has not pushed past the period's
     end (provisional: more records may come); None for a log's own statistics."""

@@ -9,7 +9,14 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from faultledger.domain.events import FaultReported, GoalOutcome, LogRecord
+from faultledger.domain.events import (
+    FaultAcknowledged,
+    FaultReported,
+    FaultShelved,
+    GoalOutcome,
+    LogRecord,
+    OperatorEvent,
+)
 from faultledger.domain.fault import Fault
 from faultledger.domain.transition import Transition
 from faultledger.domain.types import EventType, FaultStatus
@@ -71,6 +78,37 @@ class Episode(NamedTuple):
         return max(self.start_ns, as_of_ns if self.end_ns is None else self.end_ns)
 
 
+class OperatorFact(NamedTuple):
+    """What people did (docs/statistics.md, "The operator's day"): an acknowledgement, at its
+    time, with its delay from the episode's first confirmation (None: acknowledged before it
+    was confirmed); or a shelving, from ``at_ns`` to ``end_ns`` (None while it lasts). Each
+    belongs to the code, the actor (its ``source``) and the fault's severity then."""
+
+    seq: int
+    kind: str
+    """``ack`` or ``shelf``."""
+    code: str
+    source: str
+    severity: int
+    at_ns: int
+    delay_ns: int | None = None
+    until_ns: int | None = None
+    """A shelving's expiry, as its record set it."""
+    end_seq: int | None = None
+    end_ns: int | None = None
+
+    def stop_ns(self, as_of_ns: int) -> int:
+        """Where a shelving's time ends: its end record; while none is recorded, its expiry
+        or ``as_of``, whichever is first (a stopped server records the end when it starts);
+        never before its start."""
+        if self.end_ns is not None:
+            return max(self.at_ns, self.end_ns)
+        return max(self.at_ns, min(as_of_ns, self.until_ns or as_of_ns))
+
+
+ACK, SHELF = "ack", "shelf"
+
+
 class CodeTrack(NamedTuple):
     """The fold's memory of one code."""
 
@@ -92,10 +130,14 @@ class StatsOutput(NamedTuple):
     tracks: dict[str, CodeTrack]
     goals: list[GoalFact]
     """Goal outcomes, in seq order."""
+    operator: list[OperatorFact]
+    """Acknowledgements and shelvings that began, in seq order."""
+    shelf_ends: list[tuple[int, int, int]]
+    """(start seq, end seq, end ns) of shelvings that ended (maybe begun in this output)."""
 
 
 def _empty_output() -> StatsOutput:
-    return StatsOutput([], [], [], {}, [])
+    return StatsOutput([], [], [], {}, [], [], [])
 
 
 def is_chattering(times: tuple[int, ...]) -> bool:
@@ -111,7 +153,7 @@ class StatsFold:
         self._out = _empty_output()
         self._started_at: dict[int, int] = {}
         """start_seq → index in ``_out.started`` (ending an episode finds it in O(1))."""
-        self._saved_len: tuple[int, int, int, int] | None = None
+        self._saved_len: tuple[int, ...] | None = None
         self._undo: dict[str, CodeTrack | None] = {}
         """While staged: each code's entry in the output's tracks before the stage touched it
         (None: it had none). An undo log, not a copy: staging costs nothing however many
@@ -132,7 +174,8 @@ class StatsFold:
     def stage(self) -> None:
         self._staged = {}
         self._saved_len = (len(self._out.facts), len(self._out.started), len(self._out.ended),
-                           len(self._out.goals))
+                           len(self._out.goals), len(self._out.operator),
+                           len(self._out.shelf_ends))
         self._undo = {}
 
     def commit(self) -> None:
@@ -144,11 +187,13 @@ class StatsFold:
 
     def rollback(self) -> None:
         if self._saved_len is not None:
-            facts, started, ended, goals = self._saved_len
+            facts, started, ended, goals, operator, shelf_ends = self._saved_len
             del self._out.facts[facts:]
             del self._out.started[started:]
             del self._out.ended[ended:]
             del self._out.goals[goals:]
+            del self._out.operator[operator:]
+            del self._out.shelf_ends[shelf_ends:]
             tracks = self._out.tracks
             for code, before in self._undo.items():
                 if before is None:
@@ -171,7 +216,7 @@ class StatsFold:
         self._out = _empty_output()
         self._started_at = {}
         if self._saved_len is not None:
-            self._saved_len = (0, 0, 0, 0)
+            self._saved_len = (0, 0, 0, 0, 0, 0)
             self._undo = {}
         return out
 
@@ -189,6 +234,25 @@ class StatsFold:
         """A goal outcome is its own fact: it touches no code's state."""
         self._out.goals.append(GoalFact(record.seq, record.occurred_at_ns, event.action,
                                         event.status, event.server_node))
+
+    def observe_operator(self, record: LogRecord, event: OperatorEvent, before: Fault,
+                         after: Fault) -> None:
+        """An acknowledgement or shelving that changed the fault (``after``). A shelving of
+        a shelved fault ends the running one and starts another at the same instant (the
+        shelved time adds up the same); an end closes the running one."""
+        at = record.occurred_at_ns
+        if isinstance(event, FaultAcknowledged):
+            delay = None if not after.confirmed_ns or at < after.confirmed_ns else (
+                at - after.confirmed_ns)
+            self._out.operator.append(OperatorFact(record.seq, ACK, event.fault_code,
+                                                   event.actor, after.severity, at, delay))
+            return
+        if before.shelved is not None:
+            self._out.shelf_ends.append((before.shelved.seq, record.seq, at))
+        if isinstance(event, FaultShelved):
+            self._out.operator.append(OperatorFact(record.seq, SHELF, event.fault_code,
+                                                   event.actor, after.severity, at,
+                                                   until_ns=event.until_ns))
 
     def observe(self, record: LogRecord, transition: Transition | None,
                 fault: Fault | None) -> None:

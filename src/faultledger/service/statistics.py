@@ -8,10 +8,13 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta
 from fnmatch import fnmatchcase
 
+from sqlalchemy import Connection
+
 from faultledger.domain import stat_compute, validation
 from faultledger.domain.clock import MAX_TIME, MIN_TIME, NS_PER_SECOND, from_ns, to_ns
 from faultledger.domain.periods import PERIOD_KINDS, parse_bound, periods
 from faultledger.domain.shifts import Period, ShiftCalendar
+from faultledger.domain.stat_operator import add_operator_figures
 from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES, FAULT_KEYS, GROUP_KEYS, StatsRow
 from faultledger.domain.statistics import Episode, GoalFact, StatFact
 from faultledger.errors import InvalidInputError
@@ -210,27 +213,36 @@ def compute(db: Database, query: StatsQuery) -> list[StatsRow]:
     """
     if not query.periods:
         return []
-    budget = query.budget
     with db.reading() as conn:
-        if from_sums(query):
-            [sums] = _sums(stat_tables.Logs(conn), query)
-            return stat_compute.from_sums(query.periods, sums, query.as_of_ns)
-        read_goals = not query.group_by or "action" in query.group_by
-        read_faults = "action" not in query.group_by
-        only = None
-        if read_faults and query.codes is not None:
-            only = [code for code in stat_tables.codes(conn) if query.selects(code)]
-        if budget is not None and stat_tables.count_records(
-                conn, query.since_ns, query.until_ns, only, faults=read_faults,
-                goals=read_goals, most=budget.records) > budget.records:
-            raise InvalidInputError(_too_many_records(budget))
-        goals = []
-        if read_goals:
-            goals = stat_tables.goals(conn, query.since_ns, query.until_ns)
-        facts, episodes = [], []
-        if read_faults:
-            facts = stat_tables.facts(conn, query.since_ns, query.until_ns, only)
-            episodes = stat_tables.episodes(conn, query.since_ns, query.until_ns, only)
+        rows = _compute(conn, query)
+        [operated] = stat_tables.operator_facts(stat_tables.Logs(conn), query.since_ns,
+                                                query.until_ns)
+    return add_operator_figures(rows, query.periods, operated, query.as_of_ns, query.group_by,
+                                query.selects)
+
+
+def _compute(conn: Connection, query: StatsQuery) -> list[StatsRow]:
+    """The fault and goal figures (``compute`` adds the operator's)."""
+    budget = query.budget
+    if from_sums(query):
+        [sums] = _sums(stat_tables.Logs(conn), query)
+        return stat_compute.from_sums(query.periods, sums, query.as_of_ns)
+    read_goals = not query.group_by or "action" in query.group_by
+    read_faults = "action" not in query.group_by
+    only = None
+    if read_faults and query.codes is not None:
+        only = [code for code in stat_tables.codes(conn) if query.selects(code)]
+    if budget is not None and stat_tables.count_records(
+            conn, query.since_ns, query.until_ns, only, faults=read_faults,
+            goals=read_goals, most=budget.records) > budget.records:
+        raise InvalidInputError(_too_many_records(budget))
+    goals = []
+    if read_goals:
+        goals = stat_tables.goals(conn, query.since_ns, query.until_ns)
+    facts, episodes = [], []
+    if read_faults:
+        facts = stat_tables.facts(conn, query.since_ns, query.until_ns, only)
+        episodes = stat_tables.episodes(conn, query.since_ns, query.until_ns, only)
     try:
         return stat_compute.from_facts(query.periods, facts, episodes, query.as_of_ns,
                                        query.group_by, goals, query.is_estop,
@@ -261,9 +273,13 @@ def compute_in_schemas(db: Database, schemas: Sequence[str], query: StatsQuery,
         return [[] for _ in schemas]
     with db.reading() as conn:
         found = _sums(stat_tables.Logs(conn, schemas), query)
-    return [stat_compute.from_sums(query.periods, sums, query.as_of_ns, group=group,
-                                   complete_until_ns=complete)
-            for sums, group, complete in zip(found, groups, complete_until_ns, strict=True)]
+        operated = stat_tables.operator_facts(stat_tables.Logs(conn, schemas), query.since_ns,
+                                              query.until_ns)
+    return [add_operator_figures(
+        stat_compute.from_sums(query.periods, sums, query.as_of_ns, group=group,
+                               complete_until_ns=complete), query.periods, facts, query.as_of_ns)
+        for sums, group, complete, facts in zip(found, groups, complete_until_ns, operated,
+                                                strict=True)]
 
 
 def _whole_minutes(since_ns: int, until_ns: int) -> tuple[int, int, list[tuple[int, int]]]:

@@ -183,6 +183,24 @@ stat_hours = _sums_table("stat_hours", "hour")
 """The same sums per hour (hour = at_ns // 3600e9, offsets within the hour; Alembic 0006): a
 period of whole hours (a shift, a day) is read from 60 times fewer rows."""
 
+stat_operator = Table(
+    "stat_operator",
+    metadata,
+    Column("seq", SeqType, primary_key=True, autoincrement=False),
+    Column("kind", String(8), nullable=False),
+    Column("fault_code", String(128), nullable=False),
+    Column("source_id", Text, nullable=False),
+    Column("severity", Integer, nullable=False),
+    Column("at_ns", BigInteger, nullable=False),
+    Column("delay_ns", BigInteger, nullable=True),
+    Column("until_ns", BigInteger, nullable=True),
+    Column("end_seq", BigInteger, nullable=True),
+    Column("end_ns", BigInteger, nullable=True),
+)
+"""Acknowledgements and shelvings (Alembic 0007; docs/statistics.md, "The operator's day"):
+few rows, read whole for a range (acknowledgements in it, shelvings overlapping it)."""
+Index("ix_stat_operator_at", stat_operator.c.at_ns)
+
 stat_goals = Table(
     "stat_goals",
     metadata,

@@ -18,11 +18,20 @@ from sqlalchemy import (
     or_,
     select,
     text,
+    update,
 )
 from sqlalchemy import table as table_clause
 
 from faultledger.domain.stat_rows import GOAL_METRIC_OF, GOAL_METRICS
-from faultledger.domain.statistics import CodeTrack, Episode, GoalFact, StatFact, StatsOutput
+from faultledger.domain.statistics import (
+    SHELF,
+    CodeTrack,
+    Episode,
+    GoalFact,
+    OperatorFact,
+    StatFact,
+    StatsOutput,
+)
 from faultledger.store import fastpath
 from faultledger.store.dialects import upsert, upsert_add
 from faultledger.store.schema import (
@@ -34,6 +43,7 @@ from faultledger.store.schema import (
     stat_goals,
     stat_hours,
     stat_minutes,
+    stat_operator,
 )
 
 CHECKPOINT = "statistics"
@@ -45,6 +55,9 @@ _INSERT_GOAL = stat_goals.insert()
 _CODE_CHUNK = 500
 
 
+_OPERATOR_COLUMNS = ("seq", "kind", "fault_code", "source_id", "severity", "at_ns", "delay_ns",
+                     "until_ns", "end_seq", "end_ns")
+"""stat_operator's columns in the order of OperatorFact's fields."""
 _FACT_COLUMNS = ("seq", "at_ns", "fault_code", "source_id", "severity", *STAT_FLAGS, "chatter")
 """The columns of ``stat_facts``, in the order of StatFact's fields: a fact is its row."""
 _FLAG_FIELDS = [StatFact._fields.index(flag) for flag in STAT_FLAGS]
@@ -139,13 +152,18 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
     fastpath.execute_many(conn, upsert_add(stat_hours, dialect), _hour_rows(output))
     fastpath.execute_many(conn, upsert(stat_codes, dialect),
                           [_track_row(code, t) for code, t in output.tracks.items()])
+    fastpath.insert_tuples(conn, stat_operator, _OPERATOR_COLUMNS, output.operator)
+    for start_seq, end_seq, end_ns in output.shelf_ends:  # rare: one statement each
+        conn.execute(update(stat_operator).where(stat_operator.c.seq == start_seq)
+                     .values(end_seq=end_seq, end_ns=end_ns))
     fastpath.execute_many(conn, upsert(checkpoints, dialect),
                           [{"name": CHECKPOINT, "seq": seq, "hash": "", "policy_seq": 0}])
 
 
 def replace_all(conn: Connection, output: StatsOutput, seq: int) -> None:
     """Drop the statistics and write a full replay's output (``rebuild``, upgrade)."""
-    for table in (stat_facts, stat_episodes, stat_minutes, stat_hours, stat_codes, stat_goals):
+    for table in (stat_facts, stat_episodes, stat_minutes, stat_hours, stat_codes, stat_goals,
+                  stat_operator):
         conn.execute(delete(table))
     save(conn, output, seq)
 
@@ -410,6 +428,18 @@ def _facts(since_ns: int, until_ns: int) -> Any:
 def _goals(since_ns: int, until_ns: int) -> Any:
     return select(stat_goals).where(stat_goals.c.at_ns >= since_ns,
                                     stat_goals.c.at_ns < until_ns)
+
+
+def operator_facts(logs: Logs, since_ns: int, until_ns: int) -> list[list[OperatorFact]]:
+    """Per log: acknowledgements in [since, until) and shelvings that began before
+    ``until`` and had not ended by ``since`` (few rows: people's actions)."""
+    table = stat_operator
+    query = select(*(table.c[name] for name in _OPERATOR_COLUMNS)).where(
+        table.c.at_ns < until_ns,
+        or_(table.c.at_ns >= since_ns,
+            and_(table.c.kind == SHELF, or_(table.c.end_ns.is_(None),
+                                            table.c.end_ns > since_ns))))
+    return [[OperatorFact(*row) for row in rows] for rows in logs.rows(query)]
 
 
 def goals(conn: Connection, since_ns: int, until_ns: int) -> list[GoalFact]:

@@ -1,6 +1,7 @@
 """The operator's day and the episodes: acknowledgement, shelving, first occurrence ever.
 
-Six columns on ``faults`` (docs/semantics.md, "The operator's day"). Their values are
+Six columns on ``faults`` (docs/semantics.md, "The operator's day") and the statistics
+table of acknowledgements and shelvings, ``stat_operator`` (docs/statistics.md). Their values are
 folds of the log (FAILED reports per episode and in total, the first one ever, the first
 confirmation of the episode), which no SQL over the old rows can recover. So the projections
 and statistics are emptied with their checkpoints: the open that follows the upgrade finds
@@ -40,16 +41,33 @@ def _columns() -> tuple[sa.Column[Any], ...]:
 
 _PROJECTIONS = ("faults", "transitions", "ledger_identity", "stat_facts", "stat_episodes",
                 "stat_minutes", "stat_hours", "stat_goals", "stat_codes")
+_SEQ = sa.BigInteger().with_variant(sa.Integer(), "sqlite")
 
 
 def upgrade() -> None:
     with op.batch_alter_table("faults") as batch:
         for column in _columns():
             batch.add_column(column)
+    op.create_table(
+        "stat_operator",
+        sa.Column("seq", _SEQ, primary_key=True, autoincrement=False),
+        sa.Column("kind", sa.String(8), nullable=False),
+        sa.Column("fault_code", sa.String(128), nullable=False),
+        sa.Column("source_id", sa.Text(), nullable=False),
+        sa.Column("severity", sa.Integer(), nullable=False),
+        sa.Column("at_ns", sa.BigInteger(), nullable=False),
+        sa.Column("delay_ns", sa.BigInteger(), nullable=True),
+        sa.Column("until_ns", sa.BigInteger(), nullable=True),
+        sa.Column("end_seq", sa.BigInteger(), nullable=True),
+        sa.Column("end_ns", sa.BigInteger(), nullable=True),
+    )
+    op.create_index("ix_stat_operator_at", "stat_operator", ["at_ns"])
     _empty_projections()
 
 
 def downgrade() -> None:
+    op.drop_index("ix_stat_operator_at", "stat_operator")
+    op.drop_table("stat_operator")
     with op.batch_alter_table("faults") as batch:
         for column in reversed(_columns()):
             batch.drop_column(column.name)
