@@ -29,10 +29,11 @@ TIME_MAX_NS = TIME_MAX_SEC * NS_PER_SECOND + NS_PER_SECOND - 1
 up to 2262 (``clock.MAX_NS``); later ones are sent as this one (saturated, docs/ros.md)."""
 UINT32_MAX = 2**32 - 1
 UINT64_MAX = 2**64 - 1
-STATS_FLOATS = ("active_seconds", "confirmations_per_10min", "flood_seconds", "flood_percent")
+STATS_FLOATS = ("active_seconds", "confirmations_per_10min", "flood_seconds", "flood_percent",
+                "shelved_seconds")
 STATS_COUNTS = (*COUNT_METRICS, "estops", "repairs", "flood_windows", "chattering_codes",
-                "stale_codes", *GOAL_METRICS)
-STATS_OPTIONAL = ("mttr_seconds", "mtbf_seconds", "top10_share")
+                "stale_codes", *GOAL_METRICS, "acknowledgements")
+STATS_OPTIONAL = ("mttr_seconds", "mtbf_seconds", "top10_share", "mtta_seconds")
 """Figures that may be undefined (None): NaN in the message."""
 
 
