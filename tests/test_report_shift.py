@@ -112,7 +112,8 @@ def test_key_counts_are_compared_with_the_previous_night(scenario: Scenario) -> 
     assert list(figures) == ["e-stops", "aborted goals", "activations (all faults)",
                              "failed reports", "confirmations", "heals", "clears",
                              "fault time CONFIRMED (sum)", "MTTR", "MTBF", "time in flood",
-                             "chattering codes", "stale codes"]
+                             "chattering codes", "stale codes", "acknowledgements", "MTTA",
+                             "time shelved (sum)"]
 
 
 def test_top_offenders_are_ranked_by_activations(scenario: Scenario) -> None:

@@ -43,6 +43,9 @@ KEY_FIGURES: tuple[tuple[str, str, str], ...] = (
     ("flood_percent", "time in flood", "percent"),
     ("chattering_codes", "chattering codes", "count"),
     ("stale_codes", "stale codes", "count"),
+    ("acknowledgements", "acknowledgements", "count"),
+    ("mtta_seconds", "MTTA", "duration"),
+    ("shelved_seconds", "time shelved (sum)", "duration"),
 )
 """(StatsRow field, label, kind) of the figures compared with the previous shift."""
 
@@ -71,6 +74,12 @@ GLOSSARY: tuple[tuple[str, str], ...] = (
      "(ISA-18.2 alarm flood)"),
     ("chattering codes", "codes with 3 activations in less than 60 s"),
     ("stale codes", "codes CONFIRMED for 24 h or more at some moment of the shift"),
+    ("acknowledgements", "faults whose episode an operator acknowledged in the shift "
+     "(faultledger ack, the dashboard, HTTP, ROS); a new episode needs a new one"),
+    ("MTTA", "mean time to acknowledge: from an episode's first confirmation to its "
+     "acknowledgement, over the acknowledgements in the shift"),
+    ("time shelved", "time faults spent shelved (hidden as known nuisances) in the shift, "
+     "summed over faults"),
 )
 """(term, meaning) of every figure the report shows: `report-shift --glossary`, the HTML.
 The definitions in full: docs/statistics.md."""
