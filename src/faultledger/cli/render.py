@@ -306,11 +306,11 @@ def faults_table(faults: Iterable[Fault], title: str, calendar: ShiftCalendar,
     """Every value from outside (code, sources, description, title) is shown literally:
     ``safe_text.cell``, never markup, never a control character. Columns that do not fit in
     ``width`` go first: sources, description, counter, count, the milliseconds of last
-    occurred, who acknowledged ("-": nobody yet), last occurred, severity."""
+    occurred, who acknowledged and when ("-": nobody yet), last occurred, severity."""
     zone = calendar.zone
     columns = (Column("code", no_wrap=True), Column("status", no_wrap=True),
                Column("severity", drop=1, no_wrap=True),
-               Column("acked by", drop=3, cap=16),
+               Column("acknowledged", drop=3, cap=16),
                Column("count", drop=5, justify="right"),
                Column("counter", drop=6, justify="right"),
                Column(time_header("last occurred", calendar, 23, width), drop=2,
@@ -320,12 +320,18 @@ def faults_table(faults: Iterable[Fault], title: str, calendar: ShiftCalendar,
     rows: list[list[Entry]] = [
         [cell(f.fault_code), cell(f.status.value, _STATUS_STYLE[f.status]),
          severity_name(f.severity),
-         cell("-" if f.acknowledged is None else f.acknowledged.actor),
+         cell(acknowledged(f, zone)),
          str(f.occurrence_count), str(f.debounce_counter),
          Short(stamp(f.last_occurred, zone), stamp(f.last_occurred, zone, ms=False)),
          cell(", ".join(f.reporting_sources)), cell(f.description)]
         for f in faults]
     return fitted(cell(title), columns, rows, width)
+
+
+def acknowledged(fault: Fault, zone: ZoneInfo) -> str:
+    """Who acknowledged the fault's episode and when (``-``: nobody yet)."""
+    ack = fault.acknowledged
+    return "-" if ack is None else f"{ack.actor} {stamp(from_ns(ack.at_ns), zone, seconds=False)}"
 
 
 def episode_lines(fault: Fault, calendar: ShiftCalendar) -> list[str]:

@@ -139,7 +139,7 @@ function faultRow(fault) {
   const code = el("td", fault.fault_code);
   if (fault.ledger_id && logsOf(fault.robot_id).length > 1) code.appendChild(el("span", `log ${fault.ledger_id.slice(0, 8)}…`, "ledger"));
   const ack = fault.acknowledged
-    ? el("td", `✓ ${fault.acknowledged.by}`, "text acked")
+    ? el("td", `✓ ${fault.acknowledged.by} ${when(fault.acknowledged.at).slice(11, 16)}`, "text acked")
     : cell(fault.status === "CLEARED" ? "–" : el("span", "new", "unacked"));
   const tr = row([
     code, cell(statusBadge(fault.status)), cell(severityBadge(fault.severity_label)), ack,
