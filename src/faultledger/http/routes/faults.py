@@ -209,7 +209,8 @@ def router(context: Context) -> APIRouter:
         if robot is not None:
             return robot_faults(context, robot, wanted)
         seq = ledger.last_seq
-        etag = f'"{seq}-{status or "default"}-{shelved}"'
+        view = "" if shelved == "show" else f"-{shelved}"
+        etag = f'"{seq}-{status or "default"}{view}"'
         if request.headers.get("if-none-match") == etag:
             return Response(status_code=304, headers={"ETag": etag})
         content = cache.get(seq, (wanted, shelved))
