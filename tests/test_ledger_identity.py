@@ -26,7 +26,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rich.console import Console
-from sqlalchemy import create_engine
+from sqlalchemy import create_engine, text
 
 from faultledger import (
     ConfigError,
@@ -45,6 +45,7 @@ from faultledger.domain.events import (
     LogRecord,
     PolicyChanged,
 )
+from faultledger.domain.fault import Fault
 from faultledger.domain.integrity import GENESIS_HASH
 from faultledger.domain.periods import default_calendar
 from faultledger.domain.projector import Projector
@@ -85,6 +86,21 @@ def identity_rows(path: Path) -> list[tuple[Any, ...]]:
         return conn.execute("SELECT seq, robot_id, ledger_id FROM ledger_identity").fetchall()
 
 
+OLD_FAULT_COLUMNS = ("fault_code", "severity", "description", "first_occurred_ns",
+                     "last_occurred_ns", "last_passed_ns", "occurrence_count", "status",
+                     "reporting_sources", "debounce_counter", "last_report_failed")
+"""The faults table before Alembic 0007 (the operator's day)."""
+
+
+def save_old_faults(conn: Any, faults: list[Fault]) -> None:
+    """Faults as a schema before 0007 holds them: its columns only."""
+    rows = [{key: value for key, value in projections.fault_row(fault).items()
+             if key in OLD_FAULT_COLUMNS} for fault in faults]
+    if rows:
+        conn.execute(text(f"INSERT INTO faults ({', '.join(OLD_FAULT_COLUMNS)}) VALUES "
+                          f"({', '.join(':' + c for c in OLD_FAULT_COLUMNS)})"), rows)
+
+
 def pre_identity_log(path: Path, reports: int = 3) -> None:
     """A log as faultledger wrote it before identities (schema 0003): a policy and reports,
     appended with their projections in one transaction, no identity record."""
@@ -100,8 +116,9 @@ def pre_identity_log(path: Path, reports: int = 3) -> None:
     try:
         with engine.begin() as conn:
             head_hash = event_log.append(conn, records, GENESIS_HASH)
-            projections.save(conn, projector.committed(), transitions,
+            projections.save(conn, [], transitions,
                              projections.Checkpoint(len(records), head_hash, 1))
+            save_old_faults(conn, projector.committed())
             # No statistics rows: 0006 (stat_hours) moves their checkpoint back to 0 on
             # upgrade and the next writing open recomputes them from the whole log.
     finally:

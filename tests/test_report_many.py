@@ -47,7 +47,8 @@ def test_a_burst_equals_the_same_reports_made_one_by_one(tmp_path: Path) -> None
         faults_alone = alone.all_faults()
 
     def comparable(faults: list[Fault]) -> list[Fault]:
-        return [f._replace(first_occurred_ns=0, last_occurred_ns=0, last_passed_ns=0)
+        return [f._replace(first_occurred_ns=0, last_occurred_ns=0, last_passed_ns=0,
+                           first_ever_ns=0, confirmed_ns=0)
                 for f in faults]
 
     assert comparable(faults_together) == comparable(faults_alone)

@@ -221,17 +221,17 @@ def test_list_shows_every_hostile_fault_on_its_own_rows(hostile_db: Path) -> Non
     rows = {row.cells[0]: row for row in table_rows(out, "faults in")}
     assert set(rows) == {*HOSTILE, LONG_CODE}
     for code, text in HOSTILE.items():
-        shown_as(rows[code], 7, text)
-        shown_as(rows[code], 6, "/x" + text)
+        shown_as(rows[code], 8, text)  # (column 3: who acknowledged)
+        shown_as(rows[code], 7, "/x" + text)
         assert rows[code].lines <= 3
-    shown_as(rows[LONG_CODE], 7, LONG)
+    shown_as(rows[LONG_CODE], 8, LONG)
     assert "[bold red]x[/]" in out and "\\x1b[2J" in out and "\\u202e" in out
 
 
 def test_show_lists_the_fault_and_its_transitions_literally(hostile_db: Path) -> None:
     out = assert_clean(cli("show", CLEARED, db=hostile_db))
     [fault] = table_rows(out, f"fault {CLEARED}")
-    shown_as(fault, 7, HOSTILE[CLEARED])
+    shown_as(fault, 8, HOSTILE[CLEARED])
     moves = table_rows(out, "status transitions")
     assert [m.cells[3] for m in moves] == ["CONFIRMED", "CLEARED"]
     shown_as(moves[0], 5, "/x" + HOSTILE[CLEARED])

@@ -90,7 +90,8 @@ def approx_figures(expected: dict[str, object]) -> dict[str, object]:
 
 COMMON = {"occurrences": 0, "flood_windows": 0, "flood_seconds": 0.0, "flood_percent": 0.0,
           "chattering_codes": 0, "stale_codes": 0, "top10_share": 1.0, "aborted_goals": 0,
-          "canceled_goals": 0, "succeeded_goals": 0}
+          "canceled_goals": 0, "succeeded_goals": 0, "acknowledgements": 0,
+          "mtta_seconds": None, "shelved_seconds": 0.0}
 
 
 @pytest.fixture

@@ -36,6 +36,7 @@ from faultledger.service.ledger import FaultLedger, Restored, Subscription
 from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
 from faultledger.service.results import (
     ClearResult,
+    OperatorResult,
     Downtime,
     EntityLookup,
     FaultLookup,
@@ -45,6 +46,7 @@ from faultledger.service.results import (
 
 __all__ = [
     "ClearResult",
+    "OperatorResult",
     "ConfigError",
     "DamagedDatabaseError",
     "DatabaseFullError",

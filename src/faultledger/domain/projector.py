@@ -219,7 +219,8 @@ class Projector:
     def _identified(self, record: LogRecord, event: LedgerIdentified) -> None:
         """The first identity is the log's; it changes no fault and announces nothing."""
         if self.identity is not None:
-            self.ignored_identities.append(record.seq)
+            if record.seq != self.identity_seq:  # (a replay over a saved identity meets it)
+                self.ignored_identities.append(record.seq)
             return
         self.identity = LedgerIdentity(event.robot_id, event.ledger_id)
         self.identity_seq = record.seq

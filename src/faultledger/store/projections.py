@@ -30,7 +30,7 @@ class Checkpoint:
     policy_seq: int = 0
 
 
-def _fault_row(fault: Fault) -> dict[str, Any]:
+def fault_row(fault: Fault) -> dict[str, Any]:
     return {
         "fault_code": fault.fault_code,
         "severity": fault.severity,
@@ -129,7 +129,7 @@ def save(
 ) -> None:
     """Write what a batch changed and move the checkpoint, in the caller's transaction."""
     dialect = conn.dialect.name
-    fastpath.execute_many(conn, upsert(faults, dialect), [_fault_row(f) for f in changed])
+    fastpath.execute_many(conn, upsert(faults, dialect), [fault_row(f) for f in changed])
     fastpath.execute_many(conn, _INSERT_TRANSITION, [_transition_row(t) for t in new_transitions])
     fastpath.execute_many(conn, upsert(checkpoints, dialect),
                           [{"name": CHECKPOINT, "seq": checkpoint.seq, "hash": checkpoint.hash,

@@ -4,9 +4,9 @@ Six columns on ``faults`` (docs/semantics.md, "The operator's day") and the stat
 table of acknowledgements and shelvings, ``stat_operator`` (docs/statistics.md). Their values are
 folds of the log (FAILED reports per episode and in total, the first one ever, the first
 confirmation of the episode), which no SQL over the old rows can recover. So the projections
-and statistics are emptied with their checkpoints: the open that follows the upgrade finds
-them at seq 0 and replays the whole log into them, and an upgraded database has the same
-faults and figures as a new one. No record is touched.
+and statistics are emptied with their checkpoints (the log's identity row stays): the open
+that follows the upgrade finds them at seq 0 and replays the whole log into them, and an
+upgraded database has the same faults and figures as a new one. No record is touched.
 
 Revision ID: 0007_operator_day
 Revises: 0006_stat_hours
@@ -39,8 +39,9 @@ def _columns() -> tuple[sa.Column[Any], ...]:
     )
 
 
-_PROJECTIONS = ("faults", "transitions", "ledger_identity", "stat_facts", "stat_episodes",
-                "stat_minutes", "stat_hours", "stat_goals", "stat_codes")
+_PROJECTIONS = ("faults", "transitions", "stat_facts", "stat_episodes", "stat_minutes",
+                "stat_hours", "stat_goals", "stat_codes")
+"""Emptied for the replay; ``ledger_identity`` stays (the replay meets its record again)."""
 _SEQ = sa.BigInteger().with_variant(sa.Integer(), "sqlite")
 
 
@@ -71,11 +72,12 @@ def downgrade() -> None:
     with op.batch_alter_table("faults") as batch:
         for column in reversed(_columns()):
             batch.drop_column(column.name)
-    _empty_projections()
+    # The columns that stay are what an older version folds: nothing to recompute.
 
 
 def _empty_projections() -> None:
     """Projections, not records: the next open replays the log into them."""
     for table in _PROJECTIONS:
         op.execute(f"DELETE FROM {table}")
-    op.execute("DELETE FROM checkpoints WHERE name IN ('projection', 'statistics')")
+    op.execute("DELETE FROM checkpoints WHERE name = 'projection'")
+    op.execute("UPDATE checkpoints SET seq = 0 WHERE name = 'statistics'")  # as 0002-0006
