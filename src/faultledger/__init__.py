@@ -36,17 +36,16 @@ from faultledger.service.ledger import FaultLedger, Restored, Subscription
 from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
 from faultledger.service.results import (
     ClearResult,
-    OperatorResult,
     Downtime,
     EntityLookup,
     FaultLookup,
+    OperatorResult,
     ReportResult,
     VerifyReport,
 )
 
 __all__ = [
     "ClearResult",
-    "OperatorResult",
     "ConfigError",
     "DamagedDatabaseError",
     "DatabaseFullError",
@@ -70,6 +69,7 @@ __all__ = [
     "NotADatabaseError",
     "Notification",
     "NotificationType",
+    "OperatorResult",
     "Period",
     "Policy",
     "Reason",
