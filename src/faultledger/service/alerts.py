@@ -431,3 +431,32 @@ def lag_ns_of(delivery: Delivery, now_ns: int) -> int:
     been due."""
     end = delivery.delivered_ns if delivery.delivered_ns is not None else now_ns
     return max(0, end - delivery.record_ns)
+
+
+def _at(ns: int | None) -> str | None:
+    return None if not ns else from_ns(ns).isoformat(timespec="milliseconds")
+
+
+def delivery_dict(delivery: Delivery, now_ns: int) -> dict[str, object]:
+    """One delivery as `faultledger alerts --json` and GET /api/v1/alerts give it."""
+    undelivered = delivery.state in alert_outbox.UNDELIVERED
+    return {
+        "rule": delivery.rule, "key": delivery.key, "seq": delivery.seq,
+        "event": delivery.event, "fault_code": delivery.fault_code, "state": delivery.state,
+        "attempts": delivery.attempts, "last_error": delivery.last_error,
+        "due_at": _at(delivery.record_ns), "created_at": _at(delivery.created_ns),
+        "delivered_at": _at(delivery.delivered_ns),
+        "next_attempt_at": _at(delivery.next_attempt_ns) if undelivered else None,
+        "lag_seconds": round(lag_ns_of(delivery, now_ns) / NS_PER_SECOND, 3),
+    }
+
+
+def rule_dict(state: RuleState, now_ns: int) -> dict[str, object]:
+    held = state.holder is not None and state.lease_until_ns > now_ns
+    return {
+        "rule": state.rule, "cursor": state.cursor, "holder": state.holder if held else None,
+        "lease_until": _at(state.lease_until_ns) if held else None,
+        "deliveries": state.counts,
+        "oldest_undelivered_seconds": None if state.oldest_undelivered_ns is None
+        else round(max(0, now_ns - state.oldest_undelivered_ns) / NS_PER_SECOND, 3),
+    }
