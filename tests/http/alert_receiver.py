@@ -30,6 +30,8 @@ class AlertReceiver:
         self.received: list[Received] = []
         self.status = 200
         """What it answers (200, 503, 400 ...)."""
+        self.delay = 0.0
+        """Seconds it takes before answering (a receiver that is not instant)."""
         self._lock = threading.Lock()
         self._server: ThreadingHTTPServer | None = None
         self._thread: threading.Thread | None = None
@@ -46,10 +48,13 @@ class AlertReceiver:
 
         class Handler(BaseHTTPRequestHandler):
             protocol_version = "HTTP/1.1"
+            disable_nagle_algorithm = True  # else each answer waits for a delayed ACK
 
             def do_POST(self) -> None:
                 length = int(self.headers.get("Content-Length", "0"))
                 raw = self.rfile.read(length)
+                if receiver.delay:
+                    time.sleep(receiver.delay)
                 status = receiver.status
                 with receiver._lock:
                     receiver.received.append(Received(
