@@ -170,7 +170,7 @@ def test_filters_and_shelving_decide_at_the_record(ledger: FaultLedger) -> None:
                                         codes=["HW_*"], min_severity="ERROR")])
     book.prepare()
     book.renew(time.time_ns())
-    assert ledger.report("HW_LOW", "FAILED", 1, source_id="/test").accepted  # WARN: below the minimum
+    assert ledger.report("HW_LOW", "FAILED", 1, source_id="/test").accepted  # WARN: too low
     assert ledger.report("ARM", "FAILED", 3, source_id="/test").accepted  # not HW_*
     assert ledger.report("HW_A", "FAILED", 2, source_id="/test").accepted  # confirmed
     assert ledger.report("HW_A", "FAILED", 2, source_id="/test").accepted  # updated
