@@ -15,6 +15,7 @@ import contextlib
 import os
 import secrets
 import socket
+import threading
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -26,6 +27,7 @@ from faultledger.domain.alerts import FLOOD, STALE, SYNC_LAG, Alert
 from faultledger.domain.clock import NS_PER_SECOND, from_ns
 from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
+from faultledger.domain.policy import Policy
 from faultledger.domain.projector import Projector
 from faultledger.domain.types import FaultStatus
 from faultledger.errors import InvalidInputError
@@ -39,8 +41,6 @@ LEASE_NS = 15 * NS_PER_SECOND
 """How long a lease lasts unless renewed; the deliverer renews it every 5 s."""
 SCAN_RECORDS = 2000
 """Records one scan covers at most (one replay, one transaction)."""
-SCAN_CODES = 2000
-"""A scan whose records touch more codes than this replays the log up to its end instead."""
 FLOOD_HORIZON_NS = 86_400 * NS_PER_SECOND
 """A confirmation counts towards a flood when its window starts at most this long before it
 was recorded: a log catching up on old records raises no flood of the past, and a rule keeps
@@ -58,31 +58,57 @@ class Change(NamedTuple):
     recorded_ns: int
 
 
-def log_changes(ledger: FaultLedger, after: int, most_records: int = SCAN_RECORDS
+class LogReplay:
+    """The faults of the codes it has seen, as of seq ``seq``, and the policy then: each scan
+    applies only the records after it (a replay of their codes' histories first, for codes
+    it has not seen yet), so a scan costs its own records, not the whole log. The faults come
+    out exactly as ``FaultLedger.notifications_after`` has them: faults never affect one
+    another, and every policy change is applied in order."""
+
+    def __init__(self) -> None:
+        self.seq = -1
+        self._faults: dict[str, Fault] = {}
+        self._seen: set[str] = set()
+        self._policy: Policy | None = None
+
+    def changes(self, ledger: FaultLedger, after: int, most_records: int = SCAN_RECORDS
                 ) -> tuple[list[Change], int]:
-    """The announcements of the records after seq ``after`` (at most ``most_records`` of
-    them), and the seq up to which every record was read: one snapshot of the log."""
-    with ledger._db.reading() as conn:
-        head = event_log.head(conn)[0]
-        upto = min(head, after + most_records)
-        if upto <= after:
-            return [], after
-        codes = event_log.codes_after(conn, after, SCAN_CODES, upto)
-        projector = Projector()
+        """The announcements of the records after seq ``after`` (at most ``most_records``
+        of them), and the seq up to which every record was read: one snapshot of the log."""
+        with ledger._db.reading() as conn:
+            head = event_log.head(conn)[0]
+            upto = min(head, after + most_records)
+            if upto <= after:
+                return [], after
+            if after != self.seq:  # the first scan, or a rule whose cursor is elsewhere
+                self._faults, self._seen = {}, set()
+                self._policy = _replay(event_log.read_of_codes(conn, [], after)).policy
+            records = list(event_log.read(conn, after_seq=after, upto_seq=upto))
+            codes = {code for code in (r.fault_code for r in records) if code is not None}
+            unseen = sorted(codes - self._seen)
+            if unseen:
+                self._faults.update(_replay(
+                    event_log.read_of_codes(conn, unseen, after)).snapshot())
+        projector = Projector({c: self._faults[c] for c in codes if c in self._faults},
+                              self._policy, after)
         found: list[Change] = []
-        if codes is None:
-            records: Iterator[LogRecord] = event_log.read(conn, upto_seq=upto)
-            apply = projector.apply
-        else:
-            records = event_log.read_of_codes(conn, codes, upto)
-            apply = projector.apply_selected
         for record in records:
-            effect = apply(record)
-            if (record.seq > after and effect.notification is not None
-                    and effect.fault is not None):
+            effect = projector.apply_selected(record)
+            if effect.notification is not None and effect.fault is not None:
                 found.append(Change(record.seq, effect.notification.value, effect.fault,
                                     record.occurred_at_ns, record.recorded_at_ns))
-    return found, upto
+        self._faults.update(projector.snapshot())
+        self._seen.update(codes)
+        self._policy = projector.policy
+        self.seq = upto
+        return found, upto
+
+
+def _replay(records: Iterator[LogRecord]) -> Projector:
+    projector = Projector()
+    for record in records:
+        projector.apply_selected(record)
+    return projector
 
 
 def holder_id() -> str:
@@ -124,11 +150,18 @@ class AlertBook:
         self._known: set[str] = set()
         """Keys of derived alerts already in the outbox (stale is found again each check)."""
         self._stretches: dict[str, tuple[Fault, int, int]] = {}
+        self._replay = LogReplay()
+        self._sent: dict[str, dict[int, int]] = {}
+        """rule → (delivery id → attempts) answered 2xx, recorded by the next scan."""
+        self._sent_lock = threading.Lock()
         """code → (the fault as last checked, seq and time of its move into CONFIRMED)."""
 
     @contextlib.contextmanager
     def _writing(self) -> Iterator[Connection]:
-        with self.ledger._db.writing(lock_key=ALERTS_LOCK) as conn:
+        # Not flushed to disk: a power loss may undo the last of these transactions whole
+        # (rows, cursor and marks together), which the next scan does again; the log itself
+        # stays flushed (docs/alerts.md, "Durability").
+        with self.ledger._db.writing(lock_key=ALERTS_LOCK, flush=False) as conn:
             yield conn
 
     # -- leases and cursors ------------------------------------------------------------------
@@ -173,27 +206,47 @@ class AlertBook:
 
     # -- the scan ----------------------------------------------------------------------------
     def scan(self, now_ns: int) -> tuple[dict[str, int], bool]:
-        """Turn the records after the held rules' cursors into deliveries: (new deliveries
-        per rule, whether records remain beyond this scan)."""
+        """Turn the records after the held rules' cursors into deliveries, and record the
+        deliveries answered 2xx since the last scan, in one transaction: (new deliveries per
+        rule, whether records remain beyond this scan)."""
         rules = sorted(self.held)
         identity = self.ledger.identity
-        if not rules or identity is None:
-            return {}, False
-        after = min(self._cursors[rule] for rule in rules)
-        changes, through = log_changes(self.ledger, after)
-        if through <= after:
+        with self._sent_lock:
+            sent, self._sent = self._sent, {}
+        changes: list[Change] = []
+        after = through = 0
+        if rules and identity is not None:
+            after = min(self._cursors[rule] for rule in rules)
+            changes, through = self._replay.changes(self.ledger, after)
+        if through <= after and not sent:
             return {}, False
         added: dict[str, int] = {}
         with self._writing() as conn:
-            for name in self._still_held(conn, rules, now_ns):
-                rule = self.rules[name]
-                rows = self._rows(conn, rule, changes, identity.ledger_id, identity.robot_id)
+            kept = self._still_held(conn, sorted(set(rules) | set(sent)), now_ns)
+            for name in kept:
+                if name in sent:
+                    alert_outbox.mark_delivered(conn, sorted(sent[name]), sent[name], now_ns)
+                if through <= after or name not in self.rules or identity is None:
+                    continue
+                rows = self._rows(conn, self.rules[name], changes, identity.ledger_id,
+                                  identity.robot_id)
                 added[name] = alert_outbox.add(conn, rows, now_ns)
                 if through > self._cursors[name]:
                     alert_outbox.move_cursor(conn, name, through)
         for name in added:
             self._cursors[name] = max(self._cursors[name], through)
-        return added, through < self.ledger.last_seq
+        return added, through > after and through < self.ledger.last_seq
+
+    def sent(self, rule: str, done: dict[int, int]) -> None:
+        """Deliveries (id → attempts) the receiver answered 2xx: recorded as delivered by
+        the next scan's transaction (one transaction for a scan and every sender's answers
+        since the last, instead of one each)."""
+        with self._sent_lock:
+            self._sent.setdefault(rule, {}).update(done)
+
+    def unrecorded(self) -> int:
+        with self._sent_lock:
+            return sum(len(done) for done in self._sent.values())
 
     def _rows(self, conn: Connection, rule: AlertRule, changes: list[Change], ledger_id: str,
               robot_id: str) -> list[NewDelivery]:
@@ -323,17 +376,6 @@ class AlertBook:
         """The rule's undelivered deliveries, the head first."""
         with self.ledger._db.reading() as conn:
             return alert_outbox.undelivered(conn, rule, limit)
-
-    def delivered(self, rule: str, done: dict[int, int], now_ns: int) -> bool:
-        """Record deliveries (id → attempts) answered 2xx; False when the lease was lost
-        (then nothing is recorded: the new holder sends them again)."""
-        if not done:
-            return True
-        with self._writing() as conn:
-            if not alert_outbox.holds(conn, rule, self.holder, now_ns):
-                return False
-            alert_outbox.mark_delivered(conn, sorted(done), done, now_ns)
-        return True
 
     def attempt_failed(self, rule: str, delivery: Delivery, error: str, final: bool,
                        next_attempt_ns: int, now_ns: int) -> bool:

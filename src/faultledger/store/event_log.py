@@ -398,7 +398,8 @@ def codes_after(conn: Connection, seq: int, most: int, upto_seq: int | None = No
 def read_of_codes(conn: Connection, codes: Sequence[str], upto_seq: int | None = None
                   ) -> Iterator[LogRecord]:
     """Every record of these fault codes plus every policy change, in seq order: all a
-    replay of just these faults needs (faults do not affect one another)."""
+    replay of just these faults needs (faults do not affect one another). No codes: only
+    the policy changes."""
     query = (select(events).where(events.c.fault_code.in_(list(codes))
                                   | (events.c.kind == POLICY_CHANGED))
              .order_by(events.c.seq))
