@@ -5,7 +5,9 @@ headers, JSON body, arrival time) and answers 200, or a status it is told, or is
 
 from __future__ import annotations
 
+import contextlib
 import json
+import socket
 import threading
 import time
 from collections.abc import Iterator
@@ -33,6 +35,7 @@ class AlertReceiver:
         self.delay = 0.0
         """Seconds it takes before answering (a receiver that is not instant)."""
         self._lock = threading.Lock()
+        self._connections: set[socket.socket] = set()
         self._server: ThreadingHTTPServer | None = None
         self._thread: threading.Thread | None = None
         self.port = 0
@@ -49,6 +52,11 @@ class AlertReceiver:
         class Handler(BaseHTTPRequestHandler):
             protocol_version = "HTTP/1.1"
             disable_nagle_algorithm = True  # else each answer waits for a delayed ACK
+
+            def setup(self) -> None:
+                super().setup()
+                with receiver._lock:
+                    receiver._connections.add(self.connection)
 
             def do_POST(self) -> None:
                 length = int(self.headers.get("Content-Length", "0"))
@@ -79,11 +87,18 @@ class AlertReceiver:
         self._thread.start()
 
     def down(self) -> None:
-        """Close the port: every connection is refused until ``up``."""
+        """Close the port and every open connection: every connection is refused until
+        ``up``."""
         if self._server is not None:
             self._server.shutdown()
             self._server.server_close()
             self._server = None
+        with self._lock:
+            connections, self._connections = self._connections, set()
+        for connection in connections:
+            with contextlib.suppress(OSError):
+                connection.shutdown(socket.SHUT_RDWR)
+            connection.close()
 
     def delivered(self) -> list[Received]:
         """The requests it answered with a 2xx."""

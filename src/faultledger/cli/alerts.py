@@ -90,20 +90,20 @@ def _rule_line(data: dict[str, object]) -> str:
 
 def deliveries_table(found: list[Delivery], now_ns: int, width: int | None
                      ) -> RenderableType:
-    """When narrow, the key goes first, then the code; the rule, event and key are shown
-    shorter before that, and the last error folds over lines."""
-    columns = (Column("rule", no_wrap=True, squeeze=5),
+    """When narrow, the key goes first, then the tries, then the code; the rule, event, code
+    and key are shown shorter before that, and the last error folds over lines."""
+    columns = (Column("rule", no_wrap=True, squeeze=6),
                Column("event", no_wrap=True, squeeze=8),
-               Column("code", no_wrap=True, drop=6, squeeze=7),
+               Column("code", no_wrap=True, drop=4, squeeze=7),
                Column("state", no_wrap=True),
-               Column("tries", drop=4, justify="right"),
+               Column("tries", drop=5, justify="right"),
                Column("lag", no_wrap=True, justify="right"),
-               Column("last error", drop=3, cap=20, least=16),
+               Column("last error", drop=3, cap=20, least=14),
                Column("key", drop=9, no_wrap=True, squeeze=10))
     rows: list[list[Entry]] = [
-        [Short(cell(d.rule), cell(render.shorten(d.rule, 12))),
+        [Short(cell(d.rule), cell(render.shorten(d.rule, 10))),
          Short(d.event, d.event.removeprefix("fault_")),
-         Short(cell(d.fault_code or "-"), cell(render.shorten(d.fault_code or "-", 16))),
+         Short(cell(d.fault_code or "-"), cell(render.shorten(d.fault_code or "-", 12))),
          cell(d.state, _STATE_STYLE.get(d.state, "")), str(d.attempts),
          duration(alerts.lag_ns_of(d, now_ns) / NS_PER_SECOND),
          cell(d.last_error or "-"),
