@@ -50,6 +50,27 @@ def cursor_of(ledger: FaultLedger, rule: str) -> int:
     return {r.rule: r.cursor for r in alerts.rule_states(ledger)}[rule]
 
 
+def refuse(ledger: FaultLedger, backend: str, name: str, event: str, when: str) -> None:
+    """A trigger of the database itself that refuses ``event`` (INSERT, UPDATE) on the
+    outbox when ``when`` holds of the NEW row: a database error in the middle of a scan."""
+    with ledger._db.writing() as conn:
+        if backend == "sqlite":
+            conn.execute(text(f"CREATE TRIGGER {name} BEFORE {event} ON alert_outbox WHEN "
+                              f"{when} BEGIN SELECT RAISE(ABORT, 'refused'); END"))
+            return
+        conn.execute(text(f"CREATE FUNCTION {name}() RETURNS trigger AS $$ BEGIN IF {when} "
+                          "THEN RAISE EXCEPTION 'refused'; END IF; RETURN NEW; END $$ "
+                          "LANGUAGE plpgsql"))
+        conn.execute(text(f"CREATE TRIGGER {name} BEFORE {event} ON alert_outbox FOR EACH ROW "
+                          f"EXECUTE FUNCTION {name}()"))
+
+
+def allow(ledger: FaultLedger, backend: str, name: str) -> None:
+    with ledger._db.writing() as conn:
+        conn.execute(text(f"DROP TRIGGER {name}" if backend == "sqlite"
+                          else f"DROP TRIGGER {name} ON alert_outbox"))
+
+
 def scan_all(book: AlertBook) -> dict[str, int]:
     total: dict[str, int] = {}
     more = True
@@ -95,22 +116,11 @@ def test_the_scan_and_the_cursor_are_one_transaction(ledger: FaultLedger,
     start = cursor_of(ledger, "hook")
     for i in range(3):
         assert ledger.report(f"TX_{i}", "FAILED", 3, source_id="/test").accepted
-    refuse = ("CREATE TRIGGER refuse_tx BEFORE INSERT ON alert_outbox WHEN NEW.fault_code = "
-              "'TX_2' BEGIN SELECT RAISE(ABORT, 'refused'); END" if backend == "sqlite" else
-              "CREATE FUNCTION refuse_tx() RETURNS trigger AS $$ BEGIN IF NEW.fault_code = "
-              "'TX_2' THEN RAISE EXCEPTION 'refused'; END IF; RETURN NEW; END $$ LANGUAGE "
-              "plpgsql; CREATE TRIGGER refuse_tx BEFORE INSERT ON alert_outbox FOR EACH ROW "
-              "EXECUTE FUNCTION refuse_tx()")
-    with ledger._db.writing() as conn:
-        for statement in ([refuse] if backend == "sqlite" else refuse.split("; CREATE T")):
-            conn.execute(text(statement if statement.startswith("CREATE")
-                              else "CREATE T" + statement))
+    refuse(ledger, backend, "refuse_tx", "INSERT", "NEW.fault_code = 'TX_2'")
     with pytest.raises(FaultLedgerError):
         book.scan(time.time_ns())
     assert outbox(ledger) == [] and cursor_of(ledger, "hook") == start
-    with ledger._db.writing() as conn:
-        conn.execute(text("DROP TRIGGER refuse_tx" if backend == "sqlite"
-                          else "DROP TRIGGER refuse_tx ON alert_outbox"))
+    allow(ledger, backend, "refuse_tx")
     assert scan_all(book) == {"hook": 3}
     assert [d.fault_code for d in outbox(ledger)] == ["TX_0", "TX_1", "TX_2"]
 
@@ -295,3 +305,23 @@ def test_the_scans_replay_gives_the_ledgers_own_announcements(
         found += [(c.seq, c.event, c.fault) for c in changes]
     assert found == [e for e in expected if e[0] > start]
     assert len(found) > 50
+
+
+def test_answers_a_failed_scan_could_not_record_are_recorded_by_the_next(
+        ledger: FaultLedger, backend: str) -> None:
+    book = AlertBook(ledger, [make_rule()])
+    book.prepare()
+    book.renew(time.time_ns())
+    assert ledger.report("ANSWERED", "FAILED", 3, source_id="/test").accepted
+    scan_all(book)
+    [delivery] = outbox(ledger)
+    book.sent("hook", {delivery.id: 1})
+    refuse(ledger, backend, "refuse_mark", "UPDATE", "NEW.state = 'delivered'")
+    with pytest.raises(FaultLedgerError):
+        book.scan(time.time_ns())
+    assert book.unrecorded() == 1
+    assert [d.state for d in outbox(ledger)] == ["pending"]
+    allow(ledger, backend, "refuse_mark")
+    book.scan(time.time_ns())
+    assert book.unrecorded() == 0
+    assert [(d.state, d.attempts) for d in outbox(ledger)] == [("delivered", 1)]

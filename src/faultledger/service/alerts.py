@@ -221,18 +221,24 @@ class AlertBook:
         if through <= after and not sent:
             return {}, False
         added: dict[str, int] = {}
-        with self._writing() as conn:
-            kept = self._still_held(conn, sorted(set(rules) | set(sent)), now_ns)
-            for name in kept:
-                if name in sent:
-                    alert_outbox.mark_delivered(conn, sorted(sent[name]), sent[name], now_ns)
-                if through <= after or name not in self.rules or identity is None:
-                    continue
-                rows = self._rows(conn, self.rules[name], changes, identity.ledger_id,
-                                  identity.robot_id)
-                added[name] = alert_outbox.add(conn, rows, now_ns)
-                if through > self._cursors[name]:
-                    alert_outbox.move_cursor(conn, name, through)
+        try:
+            with self._writing() as conn:
+                kept = self._still_held(conn, sorted(set(rules) | set(sent)), now_ns)
+                for name in kept:
+                    if name in sent:
+                        alert_outbox.mark_delivered(conn, sorted(sent[name]), sent[name],
+                                                    now_ns)
+                    if through <= after or name not in self.rules or identity is None:
+                        continue
+                    rows = self._rows(conn, self.rules[name], changes, identity.ledger_id,
+                                      identity.robot_id)
+                    added[name] = alert_outbox.add(conn, rows, now_ns)
+                    if through > self._cursors[name]:
+                        alert_outbox.move_cursor(conn, name, through)
+        except BaseException:
+            for name, done in sent.items():  # recorded by the next scan instead
+                self.sent(name, done)
+            raise
         for name in added:
             self._cursors[name] = max(self._cursors[name], through)
         return added, through > after and through < self.ledger.last_seq
