@@ -42,7 +42,10 @@ CHECK_SEC = 5.0
 ERROR_WAIT_SEC = 1.0
 """After a database error (locked, unavailable): wait, then go on."""
 BATCH = 50
-"""Deliveries a sender reads at once."""
+"""Deliveries a sender reads at once, and the most it has delivered that are not yet
+recorded (what a crash could make a receiver see twice)."""
+RECORD_WAIT_SEC = 0.05
+"""A sender with a batch answered and not yet recorded looks again this soon."""
 
 
 BUSY_RECORDS_PER_SEC = 500.0
@@ -150,9 +153,10 @@ class RuleSender:
         with self.pace.work():
             listed = self.book.due(self.rule, BATCH + len(self._awaiting))
         self._awaiting &= {d.id for d in listed}
-        due = [d for d in listed if d.id not in self._awaiting][:BATCH]
+        room = BATCH - len(self._awaiting)  # never more than a batch answered, unrecorded
+        due = [d for d in listed if d.id not in self._awaiting][:room]
         if not due:
-            return POLL_SEC
+            return RECORD_WAIT_SEC if room <= 0 else POLL_SEC
         now = time.time_ns()
         if due[0].next_attempt_ns > now:
             self._stop.wait((due[0].next_attempt_ns - now) / NS_PER_SECOND)
