@@ -22,6 +22,7 @@ from rich.cells import cell_len
 from faultledger import FaultLedger
 from tests.http.alert_receiver import AlertReceiver, alert_receiver
 from tests.http.conftest import Server, write_config
+from tests.http.test_auth_and_stream import bearer, token
 from tests.http.test_fleet_api import PUSH, body
 from tests.test_fleet_central import records_of, robot_log
 from tests.test_safe_output import SGR, run_in_terminal
@@ -377,3 +378,22 @@ def test_the_alerts_table_fits_80_columns(
     shown = "\n".join(lines)
     for words in ("failed", "HTTP 404", "oncall", "confirmed", "1 failed"):
         assert words in shown, shown
+
+
+def test_the_listing_needs_the_read_permission_and_refuses_bad_filters(
+        tmp_path: Path, http_server: Callable[..., Server]) -> None:
+    tokens = tmp_path / "tokens.yaml"
+    viewer, reporter = token(tokens, "wall", "viewer"), token(tokens, "plc", "reporter")
+    server = http_server(config=write_config(tmp_path / "c.yaml",
+                                             http={"tokens_file": str(tokens)}))
+    assert server.client.get("/api/v1/alerts").status_code == 401
+    assert server.client.get("/api/v1/alerts", headers=bearer(reporter)).status_code == 403
+    answer = server.client.get("/api/v1/alerts", headers=bearer(viewer))
+    assert answer.status_code == 200 and answer.json() == {"rules": [], "deliveries": []}
+    refused = server.client.get("/api/v1/alerts", params={"state": "done"},
+                                headers=bearer(viewer))
+    assert refused.status_code == 400
+    assert refused.json()["message"] == ("unknown state 'done'; the states are pending, "
+                                         "retrying, delivered, failed")
+    assert server.client.get("/api/v1/alerts", params={"limit": 0},
+                             headers=bearer(viewer)).status_code in (400, 422)
