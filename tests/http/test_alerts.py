@@ -397,3 +397,25 @@ def test_the_listing_needs_the_read_permission_and_refuses_bad_filters(
                                          "retrying, delivered, failed")
     assert server.client.get("/api/v1/alerts", params={"limit": 0},
                              headers=bearer(viewer)).status_code in (400, 422)
+
+
+def test_two_servers_on_one_database_deliver_each_rule_from_one_of_them(
+        tmp_path: Path, http_server: Callable[..., Server], receiver: AlertReceiver) -> None:
+    """The first server holds the rule's lease; reports made through the second are
+    delivered by the first, once. When the first stops, the second takes the rule over."""
+    config = config_with(tmp_path, rule("hook", receiver.url, ["fault_confirmed"]))
+    first = http_server(config=config)
+    second = http_server(config=config, db=first.db)
+    [state] = alerts_json(second)["rules"]
+    assert state["holder"].split(":")[1] == str(first.process.pid)
+    post(second, [failed(f"TWO_{i:03d}") for i in range(100)])
+    receiver.wait_for(100)
+    assert first.stop() == 0
+    wait_until(lambda: (alerts_json(second)["rules"][0]["holder"] or "").split(":")[1:2]
+               == [str(second.process.pid)], 15, "the second server took the rule over")
+    post(second, [failed(f"TWO_{i:03d}") for i in range(100, 150)])
+    receiver.wait_for(150)
+    time.sleep(1.0)
+    expected = expected_keys(second.db, "hook")
+    assert len(expected) == 150
+    assert receiver.keys() == expected
