@@ -44,18 +44,19 @@ ERROR_WAIT_SEC = 1.0
 BATCH = 50
 """Deliveries a sender reads at once, and the most it has delivered that are not yet
 recorded (what a crash could make a receiver see twice)."""
-RECORD_WAIT_SEC = 0.05
-"""A sender with a batch answered and not yet recorded looks again this soon."""
+RECORD_GAP_SEC = 0.02
+"""The least time between two scans while answers wait to be recorded and ingest is not
+busy: a sender with a batch unrecorded waits for it."""
 
 
 BUSY_RECORDS_PER_SEC = 500.0
 """The log grows faster than this: ingest is busy, and the deliverer yields to it."""
-BUSY_SHARE = 0.05
+BUSY_SHARE = 0.03
 """While ingest is busy, the deliverer's threads together use at most this share of the
 time (their own CPU time, measured): with the writer in the same interpreter, every
 millisecond they spend is one the writer waits for (docs/performance.md, "Alerts")."""
 MOST_DEBT_SEC = 0.05
-MOST_CREDIT_SEC = 0.02
+MOST_CREDIT_SEC = 0.01
 
 
 class Pace:
@@ -156,7 +157,7 @@ class RuleSender:
         room = BATCH - len(self._awaiting)  # never more than a batch answered, unrecorded
         due = [d for d in listed if d.id not in self._awaiting][:room]
         if not due:
-            return RECORD_WAIT_SEC if room <= 0 else POLL_SEC
+            return POLL_SEC  # (a full batch unrecorded: the scanner wakes it once recorded)
         now = time.time_ns()
         if due[0].next_attempt_ns > now:
             self._stop.wait((due[0].next_attempt_ns - now) / NS_PER_SECOND)
@@ -282,7 +283,7 @@ class AlertDeliverer:
                 while more and not self._stop.is_set():
                     with self.pace.work():
                         added, more = self.book.scan(time.time_ns())
-                    self._wake_senders(added)
+                    self._wake_senders({**added, **dict.fromkeys(self.book.recorded, 1)})
                 if now >= check_at:
                     if self.book.check_stale(time.time_ns()) + self.book.check_lag(
                             time.time_ns()):
@@ -292,8 +293,20 @@ class AlertDeliverer:
                 log.warning("alerts: scan failed: %s: %s", type(error).__name__, error)
                 self._stop.wait(ERROR_WAIT_SEC)
                 continue
-            self._stop.wait(BUSY_SCAN_GAP_SEC if self.pace.busy() else SCAN_GAP_SEC)
+            self._gap()
             self._wake.wait(min(POLL_SEC, max(0.0, renew_at - time.monotonic())))
+
+    def _gap(self) -> None:
+        """The pause between two scans: SCAN_GAP_SEC (BUSY_SCAN_GAP_SEC while ingest is
+        busy), cut short to RECORD_GAP_SEC once a sender has answers to record (not while
+        busy: then they wait for the next scan)."""
+        if self.pace.busy():
+            self._stop.wait(BUSY_SCAN_GAP_SEC)
+            return
+        end = time.monotonic() + SCAN_GAP_SEC
+        while not self._stop.wait(RECORD_GAP_SEC) and time.monotonic() < end:
+            if self.book.unrecorded():
+                break
 
     def _wake_senders(self, added: dict[str, int]) -> None:
         for rule, count in added.items():

@@ -150,11 +150,13 @@ class AlertBook:
         self._known: set[str] = set()
         """Keys of derived alerts already in the outbox (stale is found again each check)."""
         self._stretches: dict[str, tuple[Fault, int, int]] = {}
+        """code → (the fault as last checked, seq and time of its move into CONFIRMED)."""
         self._replay = LogReplay()
         self._sent: dict[str, dict[int, int]] = {}
         """rule → (delivery id → attempts) answered 2xx, recorded by the next scan."""
         self._sent_lock = threading.Lock()
-        """code → (the fault as last checked, seq and time of its move into CONFIRMED)."""
+        self.recorded: frozenset[str] = frozenset()
+        """The rules whose answers the last scan recorded (their senders may go on)."""
 
     @contextlib.contextmanager
     def _writing(self) -> Iterator[Connection]:
@@ -201,9 +203,6 @@ class AlertBook:
             self.held = self.held - lost
         return kept
 
-    def cursor(self, rule: str) -> int:
-        return self._cursors.get(rule, 0)
-
     # -- the scan ----------------------------------------------------------------------------
     def scan(self, now_ns: int) -> tuple[dict[str, int], bool]:
         """Turn the records after the held rules' cursors into deliveries, and record the
@@ -211,6 +210,7 @@ class AlertBook:
         rule, whether records remain beyond this scan)."""
         rules = sorted(self.held)
         identity = self.ledger.identity
+        self.recorded = frozenset()
         with self._sent_lock:
             sent, self._sent = self._sent, {}
         changes: list[Change] = []
@@ -241,6 +241,7 @@ class AlertBook:
             raise
         for name in added:
             self._cursors[name] = max(self._cursors[name], through)
+        self.recorded = frozenset(name for name in kept if name in sent)
         return added, through > after and through < self.ledger.last_seq
 
     def sent(self, rule: str, done: dict[int, int]) -> None:
