@@ -419,3 +419,13 @@ def test_two_servers_on_one_database_deliver_each_rule_from_one_of_them(
     expected = expected_keys(second.db, "hook")
     assert len(expected) == 150
     assert receiver.keys() == expected
+
+
+def test_a_read_only_server_delivers_nothing(
+        tmp_path: Path, http_server: Callable[..., Server], receiver: AlertReceiver) -> None:
+    """Its writer's process delivers: a read-only server takes no rule."""
+    http_server().stop()  # the database, made by a writer
+    config = config_with(tmp_path, rule("hook", receiver.url, ["fault_confirmed"]))
+    server = http_server("--read-only", config=config)
+    assert "alerts:" not in server.output()
+    assert alerts_json(server) == {"rules": [], "deliveries": []}
