@@ -79,6 +79,7 @@ bench: $(DEV_STAMP)
 	$(BIN)/python bench/startup.py --db var/bench/rebuild.db
 	$(BIN)/python bench/stats_query.py
 	$(BIN)/python bench/http_api.py
+	$(BIN)/python bench/alerts.py
 
 clean:
 	rm -rf $(VENV) var .pytest_cache .mypy_cache .ruff_cache .hypothesis

@@ -14,7 +14,7 @@ RANK: dict[str, float] = {
     "store": 1, "migrations": 1.5,  # Alembic scripts: they read store.schema
     "service": 2,
     "reports": 3,
-    "cli": 4, "ros": 4, "http": 4, "nodemon": 4, "fleet": 4,
+    "cli": 4, "ros": 4, "http": 4, "nodemon": 4, "fleet": 4, "alerts": 4,
 }
 """A part may import parts of a lower rank; same-rank imports need ADAPTER_EDGES."""
 
@@ -25,6 +25,8 @@ ADAPTER_EDGES = {
     ("nodemon", "ros"): "the heartbeat publisher is a ROS client",
     ("cli", "fleet"): "`faultledger sync`, `verify --central` and `http`'s fleet: push",
     ("ros", "fleet"): "`serve` pushes the log to a fleet central (the config's fleet:)",
+    ("cli", "alerts"): "`faultledger http` delivers the config's alerts",
+    ("ros", "alerts"): "`serve` delivers the config's alerts",
 }
 
 

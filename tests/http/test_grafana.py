@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import socket
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -76,7 +77,16 @@ def central(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     """Faults of every severity confirmed (one FAILED confirms by default) plus a PASSED, and
     a robot's log pushed: the labelled series all have data."""
     folder = tmp_path_factory.mktemp("grafana")
-    server = start_server(folder / "central.db", config=write_config(folder / "config.yaml"))
+    # An alert rule, so the faultledger_alert_* series exist: its receiver is a closed
+    # loopback port (nothing listens), so its deliveries are retrying.
+    closed = socket.socket()
+    closed.bind(("127.0.0.1", 0))
+    port = closed.getsockname()[1]
+    closed.close()
+    rule = {"name": "grafana", "on": ["fault_confirmed"],
+            "receiver": {"type": "webhook", "url": f"http://127.0.0.1:{port}/hook"}}
+    server = start_server(folder / "central.db", config=write_config(
+        folder / "config.yaml", extra={"alerts": [rule]}))
     try:
         for severity, label in enumerate(SEVERITIES):
             answer = server.client.post("/api/v1/reports", json={
@@ -107,6 +117,8 @@ def scrape(central: Server) -> Scrape:
     assert found.value("faultledger_reports_total", event_type="PASSED") == 1
     assert found.series["faultledger_records_total"]["kind"]
     assert found.series["faultledger_fleet_lag_seconds"]["robot_id"] == {ROBOT}
+    assert found.series["faultledger_alert_deliveries"]["state"] == {
+        "pending", "retrying", "delivered", "failed"}
     return found
 
 

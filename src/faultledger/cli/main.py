@@ -10,6 +10,7 @@ from typing import Annotated
 
 import typer
 
+from faultledger.cli import alerts as alert_commands
 from faultledger.cli import anchor as anchor_commands
 from faultledger.cli import audit, render
 from faultledger.cli import fleet as fleet_commands
@@ -285,6 +286,8 @@ fleet_commands.register(app)
 operator_commands.register(app)
 # policy explain: the debounce fields of one report and their rules, in cli/policy.py.
 policy_commands.register(app)
+# alerts: the alert rules' deliveries, in cli/alerts.py.
+alert_commands.register(app)
 
 
 @app.command()

@@ -51,6 +51,7 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
 
     Over one database, until Ctrl-C; docs/http.md.
     """
+    from faultledger.alerts.deliverer import AlertDeliverer
     from faultledger.fleet.push import PusherThread
     from faultledger.http.server import HttpServer
 
@@ -62,6 +63,7 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
     except FaultLedgerError as error:
         fail(str(error))
     pusher: PusherThread | None = None
+    deliverer: AlertDeliverer | None = None
     try:
         if not read_only:  # the writer beside a read-only server warns of its own policy
             for warning in startup_warnings(ledger):
@@ -78,14 +80,24 @@ def http(listen: ListenOption = None, db: DbOption = None, config: ConfigOption 
             pusher = None if read_only else PusherThread.start_for(ledger, settings.fleet)
         except FaultLedgerError as error:
             fail(str(error))
+        # The config's alerts: delivered by this process (a read-only one delivers nothing:
+        # its writer's process does).
+        try:
+            deliverer = None if read_only else AlertDeliverer.start_for(ledger, settings.alerts)
+        except FaultLedgerError as error:
+            fail(str(error))
         mode = " (read-only)" if read_only else ""
         typer.echo(printable(f"faultledger http ready{mode}: {server.url} db="
                              f"{describe(ledger_config.url)}; {server.access}; "
                              f"dashboard {server.url}, API {server.url}docs"))
         if pusher is not None:
             typer.echo(printable(pusher.describe))
+        if deliverer is not None:
+            typer.echo(printable(deliverer.describe))
         server.run()
     finally:
+        if deliverer is not None:
+            deliverer.stop()
         if pusher is not None:
             pusher.stop()
         ledger.close()

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import time
 from collections import Counter
 from collections.abc import Iterator
 
@@ -15,10 +16,13 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import Collector
 
+from faultledger.domain.clock import NS_PER_SECOND
 from faultledger.domain.types import FaultStatus
 from faultledger.http.context import Context
 from faultledger.http.medkit import severity_label
+from faultledger.service import alerts
 from faultledger.service.fleet import Fleet
+from faultledger.service.ledger import FaultLedger
 from faultledger.service.telemetry import COMMIT_BUCKETS
 
 
@@ -67,6 +71,7 @@ class LedgerCollector(Collector):
         dropped.add_metric([], hub.dropped_clients)
         yield dropped
         yield from _fleet(self._context.robot_logs())
+        yield from _alerts(ledger)
 
 
 def _fleet(robot_logs: Fleet) -> Iterator[Metric]:
@@ -90,6 +95,27 @@ def _fleet(robot_logs: Fleet) -> Iterator[Metric]:
         held.add_metric(key, chain.records)
         unprojected.add_metric(key, behind.get(chain.ledger_id, 0))
     yield from (seconds, records, held, unprojected)
+
+
+def _alerts(ledger: FaultLedger) -> Iterator[Metric]:
+    """Per alert rule that has run on this database (docs/alerts.md); nothing without one."""
+    deliveries = GaugeMetricFamily("faultledger_alert_deliveries", "Alert deliveries in the "
+                                   "outbox by rule and state (pending, retrying, delivered, "
+                                   "failed)", labels=["rule", "state"])
+    oldest = GaugeMetricFamily("faultledger_alert_oldest_undelivered_seconds", "How long the "
+                               "oldest undelivered alert of a rule has been due (0: none)",
+                               labels=["rule"])
+    unscanned = GaugeMetricFamily("faultledger_alert_unscanned_records", "Log records a "
+                                  "rule's scan has not reached yet", labels=["rule"])
+    now = time.time_ns()
+    head = ledger.last_seq
+    for rule in alerts.rule_states(ledger):
+        for state, count in rule.counts.items():
+            deliveries.add_metric([rule.rule, state], count)
+        oldest.add_metric([rule.rule], 0.0 if rule.oldest_undelivered_ns is None
+                          else max(0, now - rule.oldest_undelivered_ns) / NS_PER_SECOND)
+        unscanned.add_metric([rule.rule], max(0, head - rule.cursor))
+    yield from (deliveries, oldest, unscanned)
 
 
 def registry(context: Context) -> CollectorRegistry:

@@ -23,6 +23,7 @@ from rclpy.utilities import (
     try_shutdown,
 )
 
+from faultledger.alerts.deliverer import AlertDeliverer
 from faultledger.domain.text import printable
 from faultledger.errors import ConfigError
 from faultledger.fleet.push import PusherThread
@@ -258,6 +259,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
     anchors: AnchorScheduler | None = None
     web: HttpServer | None = None
     pusher: PusherThread | None = None
+    deliverer: AlertDeliverer | None = None
     executor = make_executor()
     try:
         node.declare_parameter("database_path", "")
@@ -285,6 +287,9 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
         # The config's fleet: push this log to a central on a thread of its own, as `sync
         # --follow` does; a follower pushes nothing (the manager it follows does).
         pusher = None if follower else PusherThread.start_for(ledger, settings.fleet)
+        # The config's alerts, delivered off the report path (docs/alerts.md); a follower
+        # delivers nothing (the manager it follows does).
+        deliverer = None if follower else AlertDeliverer.start_for(ledger, settings.alerts)
         if http_listen is not None:
             # The same ledger: one writer for ROS and HTTP (docs/http.md).
             web = HttpServer(ledger, settings.http, config.calendar, http_listen,
@@ -303,6 +308,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
                   flush=True)
         if pusher is not None:
             print(pusher.describe, flush=True)
+        if deliverer is not None:
+            print(printable(deliverer.describe), flush=True)
         node.get_logger().info(
             f"serving {node.get_fully_qualified_name()}{mode} on {describe(url)}: restored "
             f"{restored.faults} faults from {restored.events} events")
@@ -310,6 +317,8 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
         if manager is not None:
             drain_reads(executor, manager)
     finally:
+        if deliverer is not None:
+            deliverer.stop()
         if pusher is not None:
             pusher.stop()
         if web is not None:

@@ -15,8 +15,9 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+from pydantic_core import PydanticCustomError
 
-from faultledger.domain import validation
+from faultledger.domain import alerts, validation
 from faultledger.domain.policy import Policy
 from faultledger.domain.shifts import ShiftCalendar
 from faultledger.domain.stat_rows import DEFAULT_ESTOP_CODES
@@ -181,6 +182,131 @@ class FleetSettings(BaseModel):
                 for robot, found in self.robots.items()}
 
 
+LOCATED = "located"
+"""A pydantic error type whose message names its place itself (``alerts[2] 'oncall'…``)."""
+
+
+class AlertReceiver(BaseModel):
+    """Where a rule's alerts go (docs/alerts.md, "Receivers")."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    type: Literal["webhook", "slack", "pagerduty"]
+    url: str = Field(pattern=r"^https?://[^\s/?#]+[^\s#]*$", max_length=2048)
+    """http:// or https://; PagerDuty's is https://events.pagerduty.com/v2/enqueue."""
+    routing_key: str | None = Field(default=None, pattern=r"^[A-Za-z0-9_\-]{1,128}$")
+    """PagerDuty's integration key: required for type pagerduty, refused for the others."""
+
+    @model_validator(mode="after")
+    def _routing_key(self) -> AlertReceiver:
+        if self.type == "pagerduty" and self.routing_key is None:
+            raise ValueError("a pagerduty receiver needs routing_key (the integration key of "
+                             "the PagerDuty service)")
+        if self.type != "pagerduty" and self.routing_key is not None:
+            raise ValueError(f"routing_key is for pagerduty receivers only, not {self.type}")
+        return self
+
+
+class AlertRule(BaseModel):
+    """One alert rule (docs/alerts.md): the events it sends, of which codes and severities,
+    to which receiver."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    name: str
+    on: list[str] = Field(min_length=1)
+    codes: list[str] = Field(default_factory=lambda: ["*"], min_length=1,
+                             max_length=alerts.MAX_GLOBS)
+    """fnmatch globs (case-sensitive); a fault's code must match one."""
+    min_severity: int = 0
+    """0-3 or INFO/WARN/ERROR/CRITICAL: the fault's severity after the record must be at
+    least this."""
+    receiver: AlertReceiver
+    sync_lag_seconds: float = Field(default=alerts.DEFAULT_SYNC_LAG_SECONDS, gt=0,
+                                    le=30 * 86_400)
+    """sync_lag: a robot log whose lag (docs/fleet.md, "Lag") passes this alerts once."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _yaml_on(cls, data: Any) -> Any:
+        """YAML 1.1 reads a bare ``on:`` key as the boolean true."""
+        if isinstance(data, dict) and True in data and "on" not in data:
+            data = {("on" if k is True else k): v for k, v in data.items()}
+        return data
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, value: str) -> str:
+        if alerts.RULE_NAME.fullmatch(value) is None:
+            raise ValueError(f"must be {alerts.RULE_NAME_RULE}")
+        return value
+
+    @field_validator("on")
+    @classmethod
+    def _events(cls, value: list[str]) -> list[str]:
+        for event in value:
+            if event in alerts.NOT_ALERTS:
+                raise ValueError(f"{event!r} is no alert event: {alerts.NOT_ALERTS[event]}")
+            if event not in alerts.ALERT_EVENTS:
+                raise ValueError(f"unknown event {validation.shown(event)} (events: "
+                                 f"{', '.join(alerts.ALERT_EVENTS)})")
+        return list(dict.fromkeys(value))
+
+    @field_validator("codes")
+    @classmethod
+    def _codes(cls, value: list[str]) -> list[str]:
+        for glob in value:
+            problem = alerts.glob_error(glob)
+            if problem:
+                raise ValueError(problem)
+        return value
+
+    @field_validator("min_severity", mode="before")
+    @classmethod
+    def _severity(cls, value: object) -> int:
+        return alerts.parse_severity(value)
+
+    @model_validator(mode="after")
+    def _receiver_events(self) -> AlertRule:
+        if self.receiver.type == "pagerduty":
+            missing = [e for e in self.on if e not in alerts.PAGERDUTY_ACTIONS]
+            if missing:
+                raise ValueError(f"on: {missing[0]} has no PagerDuty event action (PagerDuty "
+                                 "takes trigger, acknowledge and resolve)")
+        return self
+
+
+def alert_rules(raw: object) -> list[AlertRule]:
+    """The ``alerts`` list, each problem naming its rule: ``alerts[2] 'oncall': on: …``."""
+    if not isinstance(raw, list):
+        raise PydanticCustomError(LOCATED, "alerts must be a list of rules, got {got}",
+                                  {"got": validation.shown(raw)})
+    rules: list[AlertRule] = []
+    seen: dict[str, int] = {}
+    for index, item in enumerate(raw):
+        name = item.get("name") if isinstance(item, dict) else None
+        where = f"alerts[{index}]" + (f" {name!r}" if isinstance(name, str) else "")
+        if not isinstance(item, dict):
+            raise PydanticCustomError(LOCATED, "{where}: a rule must be a mapping, got {got}",
+                                      {"where": where, "got": validation.shown(item)})
+        try:
+            rule = AlertRule.model_validate(item)
+        except ValidationError as error:
+            first = error.errors()[0]
+            place = ".".join(str(p) for p in first["loc"])
+            message = str(first["msg"]).removeprefix("Value error, ")
+            raise PydanticCustomError(LOCATED, "{where}: {problem}", {
+                "where": where, "problem": f"{place}: {message}" if place else message,
+            }) from None
+        if rule.name in seen:
+            raise PydanticCustomError(LOCATED, "{where}: duplicate rule name (also "
+                                      "alerts[{first}])", {"where": where,
+                                                           "first": seen[rule.name]})
+        seen[rule.name] = index
+        rules.append(rule)
+    return rules
+
+
 class Settings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -204,6 +330,13 @@ class Settings(BaseModel):
     http: HttpSettings = Field(default_factory=HttpSettings)
     fleet: FleetSettings | None = None
     """Push this robot's log to a central while serving; None: no push (docs/fleet.md)."""
+    alerts: list[AlertRule] = Field(default_factory=list)
+    """Alert rules the serving process delivers (docs/alerts.md)."""
+
+    @field_validator("alerts", mode="before")
+    @classmethod
+    def _alerts(cls, value: object) -> list[AlertRule]:
+        return alert_rules([] if value is None else value)
 
     @field_validator("robot_id")
     @classmethod
@@ -262,7 +395,8 @@ def load_model(path: Path, model: type[M], what: str) -> M:
     except ValidationError as error:
         found = error.errors()
         problems = "; ".join(
-            f"{'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}"
+            e["msg"] if e["type"] == LOCATED
+            else f"{'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}"
             for e in found[:5]
         ) + (f"; and {len(found) - 5} more" if len(found) > 5 else "")
         raise ConfigError(f"{what} {path} is invalid: {problems}") from None

@@ -136,6 +136,12 @@ def directory_lock_key(ledger_id: str) -> int:
                           signed=True)
 
 
+def lag_ns(chain: fleet_log.Chain, now_ns: int) -> int:
+    """now − the time up to which the central holds the robot's whole log (docs/fleet.md,
+    "Lag"); from the first contact while it holds nothing yet."""
+    return max(0, now_ns - (chain.complete_until_ns or chain.first_contact_ns))
+
+
 class _Open:
     def __init__(self, ledger: FaultLedger) -> None:
         self.ledger = ledger
@@ -413,7 +419,7 @@ class Fleet:
         return [ChainStatus(
             c.robot_id, c.ledger_id, c.last_seq, c.last_hash, c.last_seq,
             from_ns(c.last_contact_ns),
-            round(max(0, now - (c.complete_until_ns or c.first_contact_ns)) / NS_PER_SECOND, 3),
+            round(lag_ns(c, now) / NS_PER_SECOND, 3),
             from_ns(c.complete_until_ns) if c.complete_until_ns else None,
             max(0, c.head_seq - c.last_seq)) for c in self.chains(robot_id)]
 

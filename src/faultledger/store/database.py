@@ -126,15 +126,27 @@ class Database:
             yield conn
 
     @contextlib.contextmanager
-    def writing(self, lock_key: int | None = None) -> Iterator[Connection]:
+    def writing(self, lock_key: int | None = None, *, flush: bool = True
+                ) -> Iterator[Connection]:
         """One write transaction holding the log's write lock, or another lock of the same
-        database where the dialect has several (PostgreSQL: a fleet chain's own lock)."""
+        database where the dialect has several (PostgreSQL: a fleet chain's own lock).
+
+        ``flush=False``: the commit does not wait for the disk (SQLite: synchronous=NORMAL
+        for this transaction; PostgreSQL: synchronous_commit off). It is as atomic as any,
+        and a crash of the process loses nothing; a power loss may undo it whole, never a
+        log record (the log's own commits flush the WAL, and with it every commit before
+        them). For state that can be derived again (alert delivery), so the write lock is
+        held for microseconds instead of an fsync."""
         with translate_errors(self.url), self.engine.connect() as raw:
             conn = raw.execution_options(faultledger_write=True)
             if lock_key is not None:
                 conn = conn.execution_options(faultledger_lock_key=lock_key)
-            with conn.begin():
-                yield conn
+            if flush:
+                with conn.begin():
+                    yield conn
+                return
+            with self.rules.unflushed(conn) as relaxed, relaxed.begin():
+                yield relaxed
 
     def dispose(self) -> None:
         if not self._shared:  # a log within another database leaves the pool to it

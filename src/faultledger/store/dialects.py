@@ -68,6 +68,11 @@ class DialectRules:
         """Held while a process checks and upgrades the schema: one process migrates."""
         yield
 
+    @contextlib.contextmanager
+    def unflushed(self, conn: Connection) -> Iterator[Connection]:
+        """The transaction begun inside commits without waiting for the disk."""
+        yield conn
+
     def driver_errors(self) -> tuple[type[BaseException], ...]:
         return ()
 
@@ -115,6 +120,18 @@ class SQLiteRules(DialectRules):
 
     def driver_errors(self) -> tuple[type[BaseException], ...]:
         return (sqlite3.Error,)
+
+    @contextlib.contextmanager
+    def unflushed(self, conn: Connection) -> Iterator[Connection]:
+        """synchronous=NORMAL on this connection (WAL: the commit is not fsynced; the next
+        FULL commit of any connection fsyncs it too), and FULL again after, whatever
+        happened: the pool's connections stay durable for every other writer."""
+        driver: Any = conn.connection.driver_connection
+        driver.execute("PRAGMA synchronous = NORMAL")
+        try:
+            yield conn
+        finally:
+            driver.execute("PRAGMA synchronous = FULL")
 
     def classify(self, where: str, text: str, error: BaseException) -> StoreError | None:
         if isinstance(error, sqlite3.IntegrityError | exc.IntegrityError):
@@ -179,6 +196,12 @@ class PostgreSQLRules(DialectRules):
     def insert_rows(self, conn: Connection, table: Table, columns: Sequence[str],
                     rows: Sequence[Sequence[Any]]) -> None:
         _copy_rows(conn, table, columns, rows)
+
+    @contextlib.contextmanager
+    def unflushed(self, conn: Connection) -> Iterator[Connection]:
+        """synchronous_commit off for the transaction begun inside (SET LOCAL at its
+        begin: the setting ends with it)."""
+        yield conn.execution_options(faultledger_unflushed=True)
 
     def upsert_rows(self, conn: Connection, table: Table, columns: Sequence[str],
                     rows: Sequence[Sequence[Any]], upsert_sql: str) -> None:
@@ -248,6 +271,8 @@ def _postgresql_begin(conn: Connection) -> None:
     statements = [] if write else ["SET TRANSACTION ISOLATION LEVEL REPEATABLE READ"]
     if schema is not None:  # a log in a schema of this database (a central's robot log)
         statements.append(f'SET LOCAL search_path TO "{schema}"')
+    if options.get("faultledger_unflushed", False):
+        statements.append("SET LOCAL synchronous_commit = off")
     if write:
         key = int(options.get("faultledger_lock_key", WRITE_LOCK))
         statements.append(f"SET LOCAL lock_timeout = {BUSY_TIMEOUT_MS}")

@@ -382,20 +382,28 @@ def _missing(conn: Connection, seq: int, last_needed: int) -> tuple[int, str]:
                  "deleted or renumbered")
 
 
-def codes_after(conn: Connection, seq: int, most: int) -> list[str] | None:
-    """Fault codes of the records after ``seq``; None when there are more than ``most``."""
+def codes_after(conn: Connection, seq: int, most: int, upto_seq: int | None = None
+                ) -> list[str] | None:
+    """Fault codes of the records after ``seq`` (up to ``upto_seq``); None when there are
+    more than ``most``."""
     query = (select(events.c.fault_code).where(events.c.seq > seq,
                                                events.c.fault_code.is_not(None))
              .distinct().limit(most + 1))
+    if upto_seq is not None:
+        query = query.where(events.c.seq <= upto_seq)
     codes = [row[0] for row in conn.execute(query)]
     return None if len(codes) > most else codes
 
 
-def read_of_codes(conn: Connection, codes: Sequence[str]) -> Iterator[LogRecord]:
+def read_of_codes(conn: Connection, codes: Sequence[str], upto_seq: int | None = None
+                  ) -> Iterator[LogRecord]:
     """Every record of these fault codes plus every policy change, in seq order: all a
-    replay of just these faults needs (faults do not affect one another)."""
+    replay of just these faults needs (faults do not affect one another). No codes: only
+    the policy changes."""
     query = (select(events).where(events.c.fault_code.in_(list(codes))
                                   | (events.c.kind == POLICY_CHANGED))
              .order_by(events.c.seq))
+    if upto_seq is not None:
+        query = query.where(events.c.seq <= upto_seq)
     for row in stream_rows(conn, query):
         yield _to_record(row)

@@ -121,6 +121,13 @@ def load_transitions(conn: Connection, fault_code: str | None = None) -> list[Tr
     return [_transition(row) for row in conn.execute(query)]
 
 
+def last_transition(conn: Connection, fault_code: str) -> Transition | None:
+    """The fault's newest status change (one index seek)."""
+    row = conn.execute(select(transitions).where(transitions.c.fault_code == fault_code)
+                       .order_by(transitions.c.seq.desc()).limit(1)).first()
+    return None if row is None else _transition(row)
+
+
 def save(
     conn: Connection,
     changed: Iterable[Fault],

@@ -244,3 +244,50 @@ fleet_chains = Table(
 truth; this row follows it after each push). ``head_seq``: the robot's newest seq at its last
 contact. ``complete_until_ns``: the time up to which the central holds the robot's whole log."""
 Index("ix_fleet_chains_robot", fleet_chains.c.robot_id, fleet_chains.c.first_contact_ns)
+
+# -- alert delivery (store/alert_outbox.py, docs/alerts.md; Alembic 0008) ----------------------
+alert_cursors = Table(
+    "alert_cursors",
+    metadata,
+    Column("rule", String(64), primary_key=True),
+    Column("seq", BigInteger, nullable=False),
+    Column("holder", String(160), nullable=True),
+    Column("lease_until_ns", BigInteger, nullable=False),
+)
+"""Per rule: the last seq its scan has turned into outbox rows, and the lease: which process
+delivers the rule (``holder``) until when; taken over once expired."""
+
+alert_outbox = Table(
+    "alert_outbox",
+    metadata,
+    Column("id", SeqType, primary_key=True, autoincrement=True),
+    Column("rule", String(64), nullable=False),
+    Column("key", String(255), nullable=False, unique=True),
+    Column("seq", BigInteger, nullable=False),
+    Column("event", String(32), nullable=False),
+    Column("fault_code", String(128), nullable=True),
+    Column("record_ns", BigInteger, nullable=False),
+    Column("payload", Text, nullable=False),
+    Column("state", String(16), nullable=False),
+    Column("attempts", Integer, nullable=False),
+    Column("last_error", Text, nullable=True),
+    Column("next_attempt_ns", BigInteger, nullable=False),
+    Column("created_ns", BigInteger, nullable=False),
+    Column("delivered_ns", BigInteger, nullable=True),
+)
+"""One row per delivery (idempotency ``key``), in the order the scan decided them (``id``);
+``payload`` is the alert (domain.alerts.Alert) as JSON, ``record_ns`` the recording time of
+the record it anchors on (the lag)."""
+Index("ix_alert_outbox_rule_state", alert_outbox.c.rule, alert_outbox.c.state,
+      alert_outbox.c.id)
+
+alert_marks = Table(
+    "alert_marks",
+    metadata,
+    Column("rule", String(64), primary_key=True),
+    Column("mark", String(128), primary_key=True),
+    Column("value", BigInteger, nullable=False),
+)
+"""What a rule's scan remembers between scans, moved in the transaction that moves its
+cursor: confirmations per 10-minute window (``flood:<window_ns>``) and the robot logs it
+has alerted as lagging (``lag:<ledger_id>``)."""

@@ -10,6 +10,7 @@ from faultledger.http.context import Context
 def register(app: FastAPI, context: Context) -> None:
     from faultledger.http import dashboard
     from faultledger.http.routes import (
+        alerts,
         audit,
         faults,
         fleet,
@@ -20,5 +21,6 @@ def register(app: FastAPI, context: Context) -> None:
         system,
     )
 
-    for module in (faults, operator, reports, audit, stats, metrics, system, fleet, dashboard):
+    for module in (faults, operator, reports, audit, stats, metrics, system, fleet, alerts,
+                   dashboard):
         app.include_router(module.router(context))
