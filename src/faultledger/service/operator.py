@@ -22,28 +22,31 @@ def _when(at: datetime | None) -> tuple[int, str | None]:
     return (0, problem) if problem else (to_ns(at), None)
 
 
+def _checked(fault_code: str, actor: str, text: str, text_name: str,
+             at: datetime | None) -> tuple[int, OperatorResult | None]:
+    """The action's time, or the refusal of its input (code, actor, note or reason, at)."""
+    problem = attention.input_error(fault_code, actor, text, text_name)
+    occurred_ns, time_problem = _when(at)
+    problem = problem or time_problem
+    return occurred_ns, None if problem is None else OperatorResult(False, problem)
+
+
 def acknowledge(fault_code: str, actor: str, note: str,
                 at: datetime | None) -> Operate | OperatorResult:
-    problem = attention.input_error(fault_code, actor, note, "note")
-    occurred_ns, time_problem = _when(at)
-    if problem or time_problem:
-        return OperatorResult(False, problem or time_problem or "")
-    return Operate(FaultAcknowledged(fault_code, actor, note, 0), occurred_ns)
+    occurred_ns, refused = _checked(fault_code, actor, note, "note", at)
+    return refused or Operate(FaultAcknowledged(fault_code, actor, note, 0), occurred_ns)
 
 
 def shelve(fault_code: str, actor: str, reason: str, duration: str | timedelta | float,
            at: datetime | None) -> Operate | OperatorResult:
     """``duration``: ``2h``/``90m``/``1h30m``, a timedelta or seconds."""
-    problem = attention.input_error(fault_code, actor, reason, "reason")
-    if problem:
-        return OperatorResult(False, problem)
+    occurred_ns, refused = _checked(fault_code, actor, reason, "reason", at)
+    if refused is not None:
+        return refused
     try:
         length = _duration_ns(duration)
     except ValueError as error:
         return OperatorResult(False, f"for: {error}")
-    occurred_ns, time_problem = _when(at)
-    if time_problem:
-        return OperatorResult(False, time_problem)
     until_ns = occurred_ns + length
     if not in_range(until_ns):
         return OperatorResult(False, range_message("the shelving's end", f"{until_ns} ns"))
@@ -52,11 +55,8 @@ def shelve(fault_code: str, actor: str, reason: str, duration: str | timedelta |
 
 def unshelve(fault_code: str, actor: str, reason: str,
              at: datetime | None) -> Operate | OperatorResult:
-    problem = attention.input_error(fault_code, actor, reason, "reason")
-    occurred_ns, time_problem = _when(at)
-    if problem or time_problem:
-        return OperatorResult(False, problem or time_problem or "")
-    return Operate(FaultUnshelved(fault_code, actor, reason), occurred_ns)
+    occurred_ns, refused = _checked(fault_code, actor, reason, "reason", at)
+    return refused or Operate(FaultUnshelved(fault_code, actor, reason), occurred_ns)
 
 
 def _duration_ns(duration: str | timedelta | float) -> int:
