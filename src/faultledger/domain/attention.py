@@ -128,12 +128,18 @@ SHELVED_VIEWS = ("hide", "only", "show")
 them (the "shelved" filter), or show them among the others."""
 
 
-def triage(faults: Iterable[Fault], now_ns: int, shelved: str = "hide") -> list[Fault]:
-    """The operator's list: shelved faults as ``shelved`` says, unacknowledged ones first,
-    by code within each group. An expired shelving no longer hides (``Fault.is_shelved``)."""
+def in_view(faults: Iterable[Fault], now_ns: int, shelved: str = "hide") -> list[Fault]:
+    """The faults a view with ``shelved`` (SHELVED_VIEWS) shows, in their given order. An
+    expired shelving no longer hides (``Fault.is_shelved``)."""
     if shelved not in SHELVED_VIEWS:
         raise ValueError(f"shelved must be one of {', '.join(SHELVED_VIEWS)}, got "
                          f"{shown(shelved)}")
-    chosen = [f for f in faults
-              if shelved == "show" or f.is_shelved(now_ns) == (shelved == "only")]
-    return sorted(chosen, key=lambda f: (f.acknowledged is not None, f.fault_code))
+    return [f for f in faults
+            if shelved == "show" or f.is_shelved(now_ns) == (shelved == "only")]
+
+
+def triage(faults: Iterable[Fault], now_ns: int, shelved: str = "hide") -> list[Fault]:
+    """The operator's list: ``in_view``, unacknowledged faults first, by code within each
+    group."""
+    return sorted(in_view(faults, now_ns, shelved),
+                  key=lambda f: (f.acknowledged is not None, f.fault_code))

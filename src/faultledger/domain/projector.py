@@ -186,7 +186,7 @@ class Projector:
     def _operated(self, record: LogRecord,
                   event: FaultAcknowledged | FaultShelved | FaultUnshelved) -> Effect:
         before = self.get(event.fault_code)
-        effect = self._operator(record, event)
+        effect = self._operator(record, event, before)
         if self.stats is not None and effect.fault is not None and before is not None:
             self.stats.observe_operator(record, event, before, effect.fault)
         return effect
@@ -271,11 +271,11 @@ class Projector:
         return Effect(new, self._transition(record, new, old.status, cause, source), notification)
 
     def _operator(self, record: LogRecord,
-                  event: FaultAcknowledged | FaultShelved | FaultUnshelved) -> Effect:
+                  event: FaultAcknowledged | FaultShelved | FaultUnshelved,
+                  old: Fault | None) -> Effect:
         """What people did: the status and counts stay; a record that no longer fits the
         fault (an acknowledgement of an episode that is over, or already acknowledged;
         the end of a shelving that is not in force) changes nothing."""
-        old = self.get(event.fault_code)
         if old is None:
             return _NOTHING
         at = record.occurred_at_ns

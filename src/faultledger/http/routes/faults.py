@@ -15,7 +15,7 @@ from sse_starlette import EventSourceResponse, ServerSentEvent
 from sse_starlette.sse import SendTimeoutError
 from starlette.types import Message, Receive, Scope, Send
 
-from faultledger.domain.attention import SHELVED_VIEWS, triage
+from faultledger.domain.attention import SHELVED_VIEWS, in_view
 from faultledger.domain.fault import Fault
 from faultledger.domain.fleet import robot_id_error
 from faultledger.domain.types import FaultStatus
@@ -216,9 +216,7 @@ def router(context: Context) -> APIRouter:
         content = cache.get(seq, (wanted, shelved))
         if content is None:
             chosen = [f for f in ledger.all_faults() if f.status in wanted]
-            if shelved != "show":  # the operator's view keeps the code order here
-                chosen = sorted(triage(chosen, time.time_ns(), shelved),
-                                key=lambda f: f.fault_code)
+            chosen = in_view(chosen, time.time_ns(), shelved)  # medkit's order: by code
             content = json.dumps(medkit.fault_list(chosen), separators=(",", ":")).encode()
             cache.put(seq, (wanted, shelved), content)
         return Response(content, media_type="application/json", headers={"ETag": etag})
