@@ -16,7 +16,7 @@ from faultledger.domain.integrity import GENESIS_HASH, canonical_json
 from faultledger.domain.projector import Transition
 from faultledger.domain.types import FaultStatus
 from faultledger.store import fastpath
-from faultledger.store.dialects import upsert
+from faultledger.store.dialects import bulk_load, upsert
 from faultledger.store.schema import checkpoints, faults, ledger_identity, transitions
 
 CHECKPOINT = "projection"
@@ -152,7 +152,8 @@ def replace_all(
     """Drop the projections and write a full replay's result (``rebuild``)."""
     conn.execute(delete(faults))
     conn.execute(delete(transitions))
-    save(conn, all_faults, all_transitions, checkpoint)
+    with bulk_load(conn, (faults, transitions)):
+        save(conn, all_faults, all_transitions, checkpoint)
 
 
 def load_identity(conn: Connection) -> tuple[LedgerIdentity, int] | None:

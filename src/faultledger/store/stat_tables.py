@@ -33,7 +33,7 @@ from faultledger.domain.statistics import (
     StatsOutput,
 )
 from faultledger.store import fastpath
-from faultledger.store.dialects import upsert, upsert_add
+from faultledger.store.dialects import bulk_load, upsert, upsert_add
 from faultledger.store.schema import (
     STAT_FLAGS,
     checkpoints,
@@ -162,10 +162,12 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
 
 def replace_all(conn: Connection, output: StatsOutput, seq: int) -> None:
     """Drop the statistics and write a full replay's output (``rebuild``, upgrade)."""
-    for table in (stat_facts, stat_episodes, stat_minutes, stat_hours, stat_codes, stat_goals,
-                  stat_operator):
+    tables = (stat_facts, stat_episodes, stat_minutes, stat_hours, stat_codes, stat_goals,
+              stat_operator)
+    for table in tables:
         conn.execute(delete(table))
-    save(conn, output, seq)
+    with bulk_load(conn, tables):
+        save(conn, output, seq)
 
 
 def checkpoint_seq(conn: Connection) -> int:
