@@ -61,13 +61,18 @@ lint: $(DEV_STAMP)
 typecheck: $(DEV_STAMP)
 	$(BIN)/mypy
 
+# The suites mostly wait (servers starting, subprocesses, fsyncs), so they run on several
+# workers, one test file per worker at a time (pytest-xdist; docs/testing.md).
+TEST_WORKERS ?= 4
+XDIST := -n $(TEST_WORKERS) --dist loadfile
+
 unit: $(DEV_STAMP)
-	$(BIN)/pytest -q --ignore=tests/ros
+	$(BIN)/pytest -q --ignore=tests/ros $(XDIST)
 
 # The core suite again on a real PostgreSQL 15 server the tests start themselves (Debian's
 # postgresql package; tests/pg_server.py), one database per test.
 unit-postgresql: $(DEV_STAMP)
-	$(BIN)/pytest -q --ignore=tests/ros --backend postgresql
+	$(BIN)/pytest -q --ignore=tests/ros --backend postgresql $(XDIST)
 
 # ROS processes only ever run inside a private network namespace (or localhost-only DDS).
 ros-tests: setup-dev
