@@ -168,12 +168,15 @@ def _save_tail(conn: Connection, projector: Projector) -> None:
     """Apply the records after ``projector``'s seq (it holds the saved projections, staged)
     and save what they changed, in the caller's write transaction."""
     identified = projector.identity is not None
+    whole = projector.seq == 0  # nothing saved yet (a new schema): a bulk load
     found = apply_all(projector, event_log.read(conn, after_seq=projector.seq))
-    projections.save(conn, projector.staged_faults(), found,
-                     projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
+    with (projections.loading(conn) if whole else contextlib.nullcontext()):
+        projections.save(conn, projector.staged_faults(), found,
+                         projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
     if not identified and projector.identity is not None:
         projections.save_identity(conn, projector.identity, projector.identity_seq)
-    stat_tables.save(conn, stats_of(projector).take(), projector.seq)
+    with (stat_tables.loading(conn) if whole else contextlib.nullcontext()):
+        stat_tables.save(conn, stats_of(projector).take(), projector.seq)
 
 
 def persist_lagging(conn: Connection) -> None:

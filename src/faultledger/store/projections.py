@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any
 
@@ -152,8 +153,13 @@ def replace_all(
     """Drop the projections and write a full replay's result (``rebuild``)."""
     conn.execute(delete(faults))
     conn.execute(delete(transitions))
-    with bulk_load(conn, (faults, transitions)):
+    with loading(conn):
         save(conn, all_faults, all_transitions, checkpoint)
+
+
+def loading(conn: Connection) -> AbstractContextManager[None]:
+    """Around a save that fills emptied projections (a replay of the whole log)."""
+    return bulk_load(conn, (faults, transitions))
 
 
 def load_identity(conn: Connection) -> tuple[LedgerIdentity, int] | None:

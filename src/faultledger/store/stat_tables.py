@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Sequence
+from contextlib import AbstractContextManager
 from typing import Any
 
 from sqlalchemy import (
@@ -162,12 +163,19 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
 
 def replace_all(conn: Connection, output: StatsOutput, seq: int) -> None:
     """Drop the statistics and write a full replay's output (``rebuild``, upgrade)."""
-    tables = (stat_facts, stat_episodes, stat_minutes, stat_hours, stat_codes, stat_goals,
-              stat_operator)
-    for table in tables:
+    for table in _TABLES:
         conn.execute(delete(table))
-    with bulk_load(conn, tables):
+    with loading(conn):
         save(conn, output, seq)
+
+
+_TABLES = (stat_facts, stat_episodes, stat_minutes, stat_hours, stat_codes, stat_goals,
+           stat_operator)
+
+
+def loading(conn: Connection) -> AbstractContextManager[None]:
+    """Around a save that fills emptied statistics (a replay of the whole log)."""
+    return bulk_load(conn, _TABLES)
 
 
 def checkpoint_seq(conn: Connection) -> int:
