@@ -53,6 +53,8 @@ class Run:
 def start_server(kind: str, db: Path, log: Path) -> subprocess.Popen[str]:
     if kind == "echo":
         args = [sys.executable, str(BENCH_DIR / "_ros_echo_server.py")]
+    elif kind == "shaped echo":
+        args = [sys.executable, str(BENCH_DIR / "_ros_echo_server.py"), "shaped", str(db)]
     else:
         args = [sys.executable, "-m", "faultledger.cli.main", "serve", "--db", url_for(db)]
     server = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=log.open("w"), text=True)
@@ -98,7 +100,7 @@ def run_clients(clients: int, calls: int, codes: int) -> Run:
 def measure(kind: str, clients: int, calls: int, codes: int, scratch: Path) -> Run:
     db = scratch / "faults.db"
     remove_db(db)
-    server = start_server(kind, db, scratch / f"{kind}.log")
+    server = start_server(kind, db, scratch / f"{kind.replace(' ', '-')}.log")
     try:
         run_clients(clients, min(200, calls), codes)  # warm-up: discovery, page cache
         return run_clients(clients, calls, codes)
@@ -134,27 +136,33 @@ def main() -> None:
         print(f"   raw durable commit (sqlite3, WAL, synchronous=FULL, one row): median "
               f"{commit_s * 1e3:.3f} ms", flush=True)
         for clients in (1, 4):
-            runs: dict[str, list[Run]] = {"echo": [], "faultledger": []}
+            runs: dict[str, list[Run]] = {"echo": [], "shaped echo": [], "faultledger": []}
             for _ in range(args.rounds):
                 for kind in runs:
                     runs[kind].append(measure(kind, clients, args.calls, args.codes, scratch))
             echo, ours = median_run(runs["echo"]), median_run(runs["faultledger"])
+            shaped = median_run(runs["shaped echo"])
             target = TARGET_SEQUENTIAL if clients == 1 else TARGET_FOUR
             share = ratio(ours.rate, echo.rate)
             print(f"-- {clients} client process(es)")
-            for name, run in (("echo", echo), ("faultledger", ours)):
+            for name, run in (("echo", echo), ("shaped echo", shaped), ("faultledger", ours)):
                 print(f"   {name:<12} {run.rate:8,.0f} calls/s   p50 {run.p50_ms:6.2f} ms   "
                       f"p99 {run.p99_ms:6.2f} ms   rejected {run.rejected}")
             print(f"   ratio {share:.2f}x echo (target >= {TARGET_RATIO}x: "
                   f"{verdict(share >= TARGET_RATIO)}); {ours.rate:,.0f}/s "
                   f"(target >= {target:,.0f}/s: {verdict(ours.rate >= target)})")
+            print(f"   information: {ratio(ours.rate, shaped.rate):.2f}x the shaped echo (the "
+                  f"fault manager's own node, report_fault answering at once)")
             if clients == 1:
                 limit = 1 / (1 / echo.rate + commit_s)
                 print(f"   physical limit (echo round trip + one raw durable commit): "
                       f"{limit:,.0f}/s; ratio {ratio(ours.rate, limit):.2f}x (target >= "
                       f"{TARGET_RATIO}x: {verdict(ratio(ours.rate, limit) >= TARGET_RATIO)})")
-            print(f"   rounds: echo {[round(r.rate) for r in runs['echo']]}, "
-                  f"faultledger {[round(r.rate) for r in runs['faultledger']]}", flush=True)
+                shaped_limit = 1 / (1 / shaped.rate + commit_s)
+                print(f"   information: the same limit with the shaped echo's round trip: "
+                      f"{shaped_limit:,.0f}/s; ratio {ratio(ours.rate, shaped_limit):.2f}x")
+            print("   rounds: " + ", ".join(f"{kind} {[round(r.rate) for r in kind_runs]}"
+                                            for kind, kind_runs in runs.items()), flush=True)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+from collections import deque
 from collections.abc import Callable, Coroutine
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -215,8 +216,10 @@ class FaultManagerNode:
                                 self.reads.offload(guard_service(callback, self.log, name)),
                                 qos_profile=SERVICE_QOS, callback_group=self.read_group)
             for kind, name, callback in reads)]
-        self.subscription = ledger.subscribe(
-            guard_callback(self.publish, self.log, "events publisher"))
+        self._unpublished: deque[Notification] = deque()
+        self._publish_now = node.create_guard_condition(
+            guard_callback(self._publish_queued, self.log, "events publisher"))
+        self.subscription = ledger.subscribe(self.publish)
 
     def _refuse_write(self, name: str) -> ServiceCallback:
         """A follower's answer to a write: refused, with where to send it instead."""
@@ -230,11 +233,21 @@ class FaultManagerNode:
         return refuse
 
     def publish(self, notification: Notification) -> None:
-        """Called by the ledger after the change is durable, in log order. Only medkit's
-        event types: a drop-in peer's subscribers know no others (acknowledgements and
-        shelvings are on the HTTP stream)."""
+        """Called by the ledger after the change is durable, in log order (on the thread
+        that committed it). Only medkit's event types: a drop-in peer's subscribers know no
+        others (acknowledgements and shelvings are on the HTTP stream).
+
+        The message is queued and published by the executor once it is free: after the
+        answer to the report that caused it, so a reporter waits for its commit and not
+        also for the event (a tenth of a report's round trip; docs/performance.md). The
+        queue keeps log order; ``close`` publishes what is left."""
         if notification.event_type in MEDKIT_NOTIFICATIONS:
-            self.events.publish(convert.event_msg(notification))
+            self._unpublished.append(notification)
+            self._publish_now.trigger()
+
+    def _publish_queued(self) -> None:
+        while self._unpublished:
+            self.events.publish(convert.event_msg(self._unpublished.popleft()))
 
     def report_fault(self, request: Any, response: Any) -> Any:
         return self._report_burst(self.report_service, request, response, idempotent=False)
@@ -393,6 +406,7 @@ class FaultManagerNode:
     def close(self) -> None:
         """Once the executor stopped (``serve`` first lets reads in flight finish)."""
         self.subscription.cancel()
+        guard_callback(self._publish_queued, self.log, "events publisher")()
         self.reads.close()
         for service in self.services:
             self.node.destroy_service(service)
