@@ -14,7 +14,8 @@ Fixtures:
   with SIGTERM at teardown (SIGKILL when it does not exit). A ``Manager`` can be stopped
   (``stop(sig)``), killed (``kill()``) and started again on the same database (``start()``).
   ``shared_manager`` is the same factory shared by the tests of one class. Only one manager
-  may run at a time: they all serve the same names.
+  may run at a time on one DDS domain: they all serve the same names (each pytest-xdist
+  worker has a domain of its own).
 * ``client``: a fresh rclpy Context + Node + SingleThreadedExecutor (``RosClient``) with
   ``call(srv_type, name, request, timeout=10)`` and typed helpers for the fault manager's services;
   ``shared_client`` is one per test class.
@@ -57,6 +58,13 @@ from ros2_medkit_msgs.srv import (
     ListFaultsForEntity,
     ReportFault,
 )
+
+WORKER = os.environ.get("PYTEST_XDIST_WORKER", "")
+"""``gw0``, ``gw1``, … under ``pytest -n``: each worker gets a DDS domain of its own (set here,
+before any participant exists; the fault managers it starts inherit it), so the managers of
+two workers, which serve the same names, never see each other (docs/testing.md)."""
+if WORKER.startswith("gw"):
+    os.environ["ROS_DOMAIN_ID"] = str(20 + int(WORKER[2:]))
 
 # Importing rclpy starts no DDS participant (rclpy.init + a node would); no fixture runs
 # before these guards.
