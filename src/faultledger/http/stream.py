@@ -30,7 +30,7 @@ CATCH_UP_PAGE = 1_000
 """Notifications derived from the log per read while a client catches up."""
 COALESCE_SEC = 0.025
 """After a wake-up a client waits this long, then sends everything new in one write: under
-a burst, one send per client per 10 ms instead of one per notification."""
+a burst, one send per client per 25 ms instead of one per notification."""
 
 
 @dataclass(slots=True)
