@@ -63,6 +63,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "sqlite_only: needs a SQLite file, even in the core "
                                        "suite")
+    config.addinivalue_line("markers", "alone: compares latencies within the machine's load; "
+                                       "`make` runs it after the others, with no workers "
+                                       "beside it (docs/testing.md)")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

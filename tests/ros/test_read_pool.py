@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import pytest
 from tests.ros.processes import LineProcess
 
 if TYPE_CHECKING:
@@ -34,6 +35,7 @@ def answer_of(line: str) -> dict[str, object]:
     return answer
 
 
+@pytest.mark.alone  # other workers' load would slow the answer's send, not the query
 def test_reports_are_answered_while_a_long_statistics_query_computes(
         manager: ManagerFactory, client: RosClient, tmp_path: Path) -> None:
     fault_manager = manager()
