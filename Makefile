@@ -75,15 +75,19 @@ unit-postgresql: $(DEV_STAMP)
 	$(BIN)/pytest -q --ignore=tests/ros --backend postgresql $(XDIST)
 
 # ROS processes only ever run inside a private network namespace (or localhost-only DDS).
-# Each worker has a DDS domain of its own (tests/ros/conftest.py), so its fault managers,
-# which all serve /fault_manager/..., never answer another worker's clients.
-ROS_WORKERS ?= 3
+# One process by default: on workers, a busy machine slows DDS discovery enough that a first
+# request's answer is sometimes lost (docs/testing.md). ROS_WORKERS=3 runs them on workers, each
+# on a DDS domain of its own (tests/ros/conftest.py); tests marked `alone` compare latencies
+# within the machine's load and then run afterwards, by themselves.
+ROS_WORKERS ?= 0
 
-# Tests marked `alone` compare latencies within the machine's load: they run afterwards, by
-# themselves.
 ros-tests: setup-dev
+ifeq ($(ROS_WORKERS),0)
+	scripts/in-netns $(BIN)/pytest -q tests/ros
+else
 	scripts/in-netns $(BIN)/pytest -q tests/ros -n $(ROS_WORKERS) --dist loadfile -m "not alone"
 	scripts/in-netns $(BIN)/pytest -q tests/ros -m alone
+endif
 
 bench: $(DEV_STAMP)
 	$(BIN)/python bench/ingest.py
