@@ -37,7 +37,11 @@ async def client(http: httpx.AsyncClient, received: Received,
         async for chunk in response.aiter_bytes():
             now = time.time()
             text = rest + chunk
-            cut = text.rfind(b"\n\n") + 2  # whole blocks only; the rest waits for more
+            end = text.rfind(b"\n\n")
+            if end < 0:  # no whole block yet (a TCP segment inside one): wait for more
+                rest = text
+                continue
+            cut = end + 2  # whole blocks only; the rest waits for more
             for found in ID.findall(text[:cut]):
                 received.ids.append(int(found))
                 received.times.append(now)
