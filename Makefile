@@ -61,8 +61,9 @@ lint: $(DEV_STAMP)
 typecheck: $(DEV_STAMP)
 	$(BIN)/mypy
 
-# The suites mostly wait (servers starting, subprocesses, fsyncs), so they run on several
-# workers, one test file per worker at a time (pytest-xdist; docs/testing.md).
+# One pytest process keeps about one core busy and waits the rest (servers starting, fsyncs):
+# the core suites run on workers, whole test files each, and use both cores (pytest-xdist;
+# docs/testing.md).
 TEST_WORKERS ?= 4
 XDIST := -n $(TEST_WORKERS) --dist loadfile
 
