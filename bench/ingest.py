@@ -6,6 +6,7 @@ import argparse
 import hashlib
 import json
 import os
+import resource
 import sqlite3
 import statistics
 import subprocess
@@ -36,6 +37,24 @@ Plan = list[tuple[str, str, str]]
 
 
 @dataclass(frozen=True)
+class Usage:
+    """getrusage of this process over a run: where its CPU went and how often it switched."""
+
+    user: float
+    system: float
+    voluntary: int
+    involuntary: int
+
+
+def usage_since(start: Usage | None = None) -> Usage:
+    now = resource.getrusage(resource.RUSAGE_SELF)
+    if start is None:
+        return Usage(now.ru_utime, now.ru_stime, now.ru_nvcsw, now.ru_nivcsw)
+    return Usage(now.ru_utime - start.user, now.ru_stime - start.system,
+                 now.ru_nvcsw - start.voluntary, now.ru_nivcsw - start.involuntary)
+
+
+@dataclass(frozen=True)
 class Run:
     name: str
     reports: int
@@ -44,6 +63,7 @@ class Run:
     commits: int
     latencies: list[float]
     cpu_seconds: float = 0.0
+    usage: Usage | None = None
 
     @property
     def rate(self) -> float:
@@ -69,15 +89,15 @@ def run_ledger(work: Plan, threads: int, db: Path, fsync: bool = True) -> Run:
         if not fsync:
             ledger._writer._connection._driver.execute("PRAGMA synchronous = OFF")
         seq0, commits0 = ledger.last_seq, ledger._writer.commits
-        cpu0 = time.process_time()
+        cpu0, used0 = time.process_time(), usage_since()
         seconds, rejected, latencies = report_concurrently(ledger, work, threads)
-        cpu = time.process_time() - cpu0
+        cpu, used = time.process_time() - cpu0, usage_since(used0)
         if rejected:
             raise SystemExit(f"{rejected} reports were rejected")
         name = f"FaultLedger, {threads} thread{'s' if threads > 1 else ''}"
         return Run(name if fsync else f"{name}, fsync off", len(work),
                    ledger.last_seq - seq0, seconds, ledger._writer.commits - commits0, latencies,
-                   cpu)
+                   cpu, used)
     finally:
         ledger.close()
 
@@ -92,7 +112,7 @@ def run_bursts(work: Plan, burst: int, db: Path) -> Run:
         requests = [ReportRequest(code, kind, 2, "bench", source) for code, kind, source in work]
         seq0, commits0 = ledger.last_seq, ledger._writer.commits
         latencies: list[float] = []
-        cpu0, start = time.process_time(), time.perf_counter()
+        cpu0, used0, start = time.process_time(), usage_since(), time.perf_counter()
         for first in range(0, len(requests), burst):
             t0 = time.perf_counter()
             results = ledger.report_many(requests[first:first + burst])
@@ -102,7 +122,7 @@ def run_bursts(work: Plan, burst: int, db: Path) -> Run:
         seconds, cpu = time.perf_counter() - start, time.process_time() - cpu0
         return Run(f"FaultLedger, 1 caller, bursts of {burst}", len(work),
                    ledger.last_seq - seq0, seconds, ledger._writer.commits - commits0,
-                   latencies, cpu)
+                   latencies, cpu, usage_since(used0))
     finally:
         ledger.close()
 
@@ -280,7 +300,7 @@ def explain(raw: Run, many: Run, burst: Run, off: dict[str, Run], threads: int) 
           f"{burst.rate:,.0f}/s, {cpu_us(many):.0f} against {cpu_us(burst):.0f} µs CPU per "
           f"report; the {cpu_us(many) - cpu_us(burst):.0f} µs between are what {threads} "
           "synchronous threads cost (each sleeps until its commit is durable, then waits its "
-          "turn for the interpreter lock)")
+          "turn for the interpreter lock: the context switches above)")
 
 
 # -- main ----------------------------------------------------------------------------------------
@@ -295,6 +315,11 @@ def show(run: Run) -> None:
         print(f"   {'':<42} {run.latency_line()}")
     if run.cpu_seconds:
         print(f"   {'':<42} process CPU per report: {run.cpu_seconds / run.reports * 1e3:.3f} ms")
+    if run.usage is not None:
+        used, n = run.usage, run.reports
+        print(f"   {'':<42} per report: user {used.user / n * 1e6:.0f} µs, system "
+              f"{used.system / n * 1e6:.0f} µs, context switches {used.voluntary / n:.2f} "
+              f"voluntary + {used.involuntary / n:.2f} involuntary")
 
 
 def median_run(runs: list[Run]) -> Run:
