@@ -29,8 +29,11 @@ DEFAULT_CAPACITY = 10_000
 CATCH_UP_PAGE = 1_000
 """Notifications derived from the log per read while a client catches up."""
 COALESCE_SEC = 0.025
-"""After a wake-up a client waits this long, then sends everything new in one write: under
-a burst, one send per client per 25 ms instead of one per notification."""
+"""The clients are woken this long after the first notification of a quiet spell, and each
+then sends everything new in one write: under a burst, one send per client per 25 ms instead
+of one per notification. One timer for the hub, not one per client: 100 clients waking twice
+per window (once to start their own wait, once at its end) cost the event loop a scheduling
+round each, which the reports' answers queued behind (docs/performance.md)."""
 
 
 @dataclass(slots=True)
@@ -106,7 +109,12 @@ class StreamHub:
                 return
             self._wake_pending = True
         with contextlib.suppress(RuntimeError):  # a closed loop: the server is stopping
-            self._loop.call_soon_threadsafe(self._wake)
+            self._loop.call_soon_threadsafe(self._wake_soon)
+
+    def _wake_soon(self) -> None:
+        """On the loop: wake the clients once the coalescing window has passed."""
+        assert self._loop is not None
+        self._loop.call_later(COALESCE_SEC, self._wake)
 
     def _wake(self) -> None:
         with self._lock:
@@ -165,7 +173,6 @@ class StreamHub:
                 continue
             assert changed is not None
             await changed.wait()
-            await asyncio.sleep(COALESCE_SEC)
 
     def _index_after(self, sent: int) -> int:
         """Absolute index of the first buffered notification with a seq above ``sent``."""
