@@ -201,19 +201,24 @@ def bench_stream(folder: Path, seconds: float, hogs: int = 2) -> bool:
     print(f"clients with a gap, a duplicate or a wrong order: {problems}")
     print(f"delivery latency (receive - POST sent): p50 {p50 * 1e3:.1f} ms, "
           f"p99 {p99 * 1e3:.1f} ms, max {max(latencies) * 1e3:.1f} ms")
-    print(f"ingest: {alone:.0f}/s without clients, {crowded:.0f}/s with 100: "
-          f"ratio {ratio(crowded, alone):.2f}")
+    print(f"ingest at 1,000/s: {alone:.0f}/s without clients, {crowded:.0f}/s with 100 and "
+          f"the {hogs} hogs: ratio {ratio(crowded, alone):.2f}")
     fast_alone, _, _, _ = stream_run(folder, "max-alone", 0, 0, seconds / 2)
     fast_crowd, _, _, _ = stream_run(folder, "max-crowd", 100, 0, seconds / 2)
     fast_ratio = ratio(fast_crowd, fast_alone)
     print(f"maximum ingest (one sender, batches of 10): {fast_alone:.0f}/s without clients, "
           f"{fast_crowd:.0f}/s with 100: ratio {fast_ratio:.2f} (target >= 0.7: "
           f"{verdict(fast_ratio >= 0.7)})")
-    good = (problems == 0 and len(latencies) == 100 * notifications and p99 <= 0.1
-            and ratio(crowded, alone) >= 0.9 and fast_ratio >= 0.7)
-    print(f"every notification, in order, p99 <= 100 ms with {hogs} CPU hogs, ingest ratio "
-          f">= 0.9, maximum ingest ratio >= 0.7: {verdict(good)}")
-    return good
+    checks = [
+        ("every notification to every client, in order",
+         problems == 0 and len(latencies) == 100 * notifications),
+        (f"p99 <= 100 ms with {hogs} CPU hogs (issue 20)", p99 <= 0.1),
+        ("maximum ingest with the clients >= 0.7x without (issue 20)", fast_ratio >= 0.7),
+        ("ingest at 1,000/s with the clients >= 0.9x without", ratio(crowded, alone) >= 0.9),
+    ]
+    for name, ok in checks:
+        print(f"   {name:<62} {verdict(ok)}")
+    return all(ok for _, ok in checks)
 
 
 def main() -> None:
