@@ -96,7 +96,7 @@ async def main(url: str, count: int, seconds: float, out: str) -> None:
             opened.set()
 
     loop = asyncio.get_running_loop()
-    transports: list[asyncio.BaseTransport] = []
+    transports: list[asyncio.Transport] = []
     for received in results:
         transport, _ = await loop.create_connection(
             partial(StreamClient, request, received, one_open), host, port)
@@ -107,8 +107,8 @@ async def main(url: str, count: int, seconds: float, out: str) -> None:
     last, until = int(line), time.time() + seconds
     while time.time() < until and not all(r.ids and r.ids[-1] >= last for r in results):
         await asyncio.sleep(0.1)
-    for transport in transports:
-        transport.close()
+    for opened_transport in transports:
+        opened_transport.close()
     with open(out, "w") as file:
         json.dump([list(zip(r.ids, r.times, strict=True)) for r in results], file)
 
