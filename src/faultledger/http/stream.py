@@ -31,9 +31,9 @@ CATCH_UP_PAGE = 1_000
 COALESCE_SEC = 0.025
 """The clients are woken this long after the first notification of a quiet spell, and each
 then sends everything new in one write: under a burst, one send per client per 25 ms instead
-of one per notification. One timer for the hub, not one per client: 100 clients waking twice
-per window (once to start their own wait, once at its end) cost the event loop a scheduling
-round each, which the reports' answers queued behind (docs/performance.md)."""
+of one per notification. One timer for the hub, not one per client: each client used to wake
+twice per window (once to start its own 25 ms sleep, once at its end), two scheduling rounds of
+the event loop per client that the reports' answers share (docs/performance.md, HTTP stream)."""
 
 
 @dataclass(slots=True)
