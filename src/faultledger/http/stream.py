@@ -69,6 +69,8 @@ class StreamHub:
         self._stopped = False
         self.clients = 0
         self.dropped_clients = 0
+        self._joined: tuple[int, int, bytes] | None = None
+        """(cursor, end, bytes) of the last whole take (event loop only)."""
 
     # -- lifecycle (on the server's event loop) ---------------------------------------------
     def start(self) -> None:
@@ -188,12 +190,25 @@ class StreamHub:
             return base + low
 
     def _take(self, cursor: int, sent: int) -> tuple[bytes, int, int, bool]:
+        """The bytes of the buffered notifications from ``cursor`` on (those after ``sent``),
+        the new cursor and seq, and whether the client fell off the buffer.
+
+        Clients woken together are at the same cursor: the bytes from one to the buffer's end
+        are joined once per wake-up for all of them (``_joined``), not once per client."""
         with self._lock:
             buffer = self._buffer
             if cursor < buffer.base:
                 return b"", cursor, sent, True
-            ready = buffer.items[cursor - buffer.base:]
-        frames = [self.frame(item) for item in ready if item.notification.seq > sent]
-        if ready:
-            sent = max(sent, ready[-1].notification.seq)
-        return b"".join(frames), cursor + len(ready), sent, False
+            end = buffer.base + len(buffer.items)
+            if cursor == end:
+                return b"", cursor, sent, False
+            newest = buffer.items[-1].notification.seq
+            whole = buffer.items[cursor - buffer.base].notification.seq > sent
+            joined = self._joined
+            if whole and joined is not None and joined[0] == cursor and joined[1] == end:
+                return joined[2], end, max(sent, newest), False
+            ready = buffer.items[cursor - buffer.base:end - buffer.base]
+        data = b"".join([self.frame(item) for item in ready if item.notification.seq > sent])
+        if whole:
+            self._joined = (cursor, end, data)
+        return data, end, max(sent, newest), False
