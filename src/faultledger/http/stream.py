@@ -3,7 +3,8 @@
 One hub per server subscribes to the ledger once. The writer's callback only appends the
 notification to a shared, bounded buffer and wakes the event loop, so no number of stream
 clients, fast or stalled, ever slows a report. Each client reads the buffer with its own cursor
-and encodes nothing itself: every notification is encoded once, on first use.
+and encodes nothing itself: every notification is encoded once, on first use, and the bytes of
+one wake-up are joined once for all the clients standing at the same cursor.
 
 A client whose cursor falls off the buffer (it stalled for more than ``capacity``
 notifications) is disconnected; it reconnects with ``Last-Event-ID`` and catches up from the
