@@ -35,6 +35,10 @@ then sends everything new in one write: under a burst, one send per client per 2
 of one per notification. One timer for the hub, not one per client: each client used to wake
 twice per window (once to start its own 25 ms sleep, once at its end), two scheduling rounds of
 the event loop per client that the reports' answers share (docs/performance.md, HTTP stream)."""
+WAKE_GROUPS = 8
+"""The clients are woken in this many groups, one group per turn of the event loop: a report's
+answer that becomes ready meanwhile goes out between two groups, not after every client's
+write (100 writes take the loop a few milliseconds)."""
 
 
 @dataclass(slots=True)
@@ -64,7 +68,9 @@ class StreamHub:
         self._lock = threading.Lock()
         self._buffer = _Buffer()
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._changed: asyncio.Event | None = None
+        self._changed: list[asyncio.Event] = []
+        """One event per wake group, replaced at each wake-up."""
+        self._next_group = 0
         self._wake_pending = False
         self._subscription: Subscription | None = None
         self._stopped = False
@@ -76,7 +82,7 @@ class StreamHub:
     # -- lifecycle (on the server's event loop) ---------------------------------------------
     def start(self) -> None:
         self._loop = asyncio.get_running_loop()
-        self._changed = asyncio.Event()
+        self._changed = [asyncio.Event() for _ in range(WAKE_GROUPS)]
         self._subscription = self._ledger.subscribe(self._on_notification)
         with self._lock:
             self._buffer.covered_after = self._ledger.last_seq
@@ -95,8 +101,8 @@ class StreamHub:
         if self._subscription is not None:
             self._subscription.cancel()
             self._subscription = None
-        if self._changed is not None:
-            self._changed.set()
+        for changed in self._changed:
+            changed.set()
 
     # -- writer side (any thread) -----------------------------------------------------------
     def _on_notification(self, notification: Notification) -> None:
@@ -122,9 +128,15 @@ class StreamHub:
     def _wake(self) -> None:
         with self._lock:
             self._wake_pending = False
-        assert self._changed is not None
-        self._changed.set()
-        self._changed = asyncio.Event()
+        events, self._changed = self._changed, [asyncio.Event() for _ in range(WAKE_GROUPS)]
+        self._set_from(events, 0)
+
+    def _set_from(self, events: list[asyncio.Event], index: int) -> None:
+        """Wake group ``index`` now and the next one on the loop's next turn."""
+        events[index].set()
+        if index + 1 < len(events):
+            assert self._loop is not None
+            self._loop.call_soon(self._set_from, events, index + 1)
 
     # -- client side (event loop) -----------------------------------------------------------
     def frame(self, item: _Item) -> bytes:
@@ -149,6 +161,7 @@ class StreamHub:
 
     async def _follow(self, sent: int) -> AsyncIterator[bytes]:
         loop = asyncio.get_running_loop()
+        group, self._next_group = self._next_group, (self._next_group + 1) % WAKE_GROUPS
         cursor: int | None = None
         while not self._stopped:
             if cursor is None:
@@ -166,7 +179,7 @@ class StreamHub:
                         sent = max(sent, head)
                     continue
                 cursor = self._index_after(sent)
-            changed = self._changed
+            changed = self._changed[group] if self._changed else None
             frames, cursor, sent, fell_behind = self._take(cursor, sent)
             if fell_behind:
                 self.dropped_clients += 1
