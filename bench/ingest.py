@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -78,10 +79,15 @@ class Run:
 
 
 # -- FaultLedger ----------------------------------------------------------------------------------
-def run_ledger(work: Plan, threads: int, db: Path, fsync: bool = True) -> Run:
-    """``fsync=False``: the writer's connection at synchronous=OFF, so nothing waits for the
-    disk and the process CPU is faultledger's and SQLite's work alone (never a setting of
-    faultledger's: it measures what a report costs besides its fsync)."""
+Sender = Callable[[FaultLedger], tuple[float, list[float]]]
+"""Sends the plan's reports to a ledger; the seconds it took and the latencies per call."""
+
+
+def measure_ledger(name: str, reports: int, db: Path, send: Sender, fsync: bool = True) -> Run:
+    """One configuration on a fresh ledger: ``send`` timed, with the records, commits and CPU
+    it caused. ``fsync=False``: the writer's connection at synchronous=OFF, so nothing waits
+    for the disk and the process CPU is faultledger's and SQLite's work alone (never a
+    setting of faultledger's: it measures what a report costs besides its fsync)."""
     ledger = FaultLedger.open(url_for(db), policy=Policy())
     try:
         # Warm-up outside the timing: records the policy, compiles the SQLAlchemy statements.
@@ -90,41 +96,44 @@ def run_ledger(work: Plan, threads: int, db: Path, fsync: bool = True) -> Run:
             ledger._writer._connection._driver.execute("PRAGMA synchronous = OFF")
         seq0, commits0 = ledger.last_seq, ledger._writer.commits
         cpu0, used0 = time.process_time(), usage_since()
-        seconds, rejected, latencies = report_concurrently(ledger, work, threads)
+        seconds, latencies = send(ledger)
         cpu, used = time.process_time() - cpu0, usage_since(used0)
-        if rejected:
-            raise SystemExit(f"{rejected} reports were rejected")
-        name = f"FaultLedger, {threads} thread{'s' if threads > 1 else ''}"
-        return Run(name if fsync else f"{name}, fsync off", len(work),
-                   ledger.last_seq - seq0, seconds, ledger._writer.commits - commits0, latencies,
-                   cpu, used)
+        return Run(name if fsync else f"{name}, fsync off", reports, ledger.last_seq - seq0,
+                   seconds, ledger._writer.commits - commits0, latencies, cpu, used)
     finally:
         ledger.close()
+
+
+def run_ledger(work: Plan, threads: int, db: Path, fsync: bool = True) -> Run:
+    """``threads`` synchronous callers, each reporting one at a time."""
+    def send(ledger: FaultLedger) -> tuple[float, list[float]]:
+        seconds, rejected, latencies = report_concurrently(ledger, work, threads)
+        if rejected:
+            raise SystemExit(f"{rejected} reports were rejected")
+        return seconds, latencies
+
+    name = f"FaultLedger, {threads} thread{'s' if threads > 1 else ''}"
+    return measure_ledger(name, len(work), db, send, fsync)
 
 
 def run_bursts(work: Plan, burst: int, db: Path) -> Run:
     """One caller sending the reports in bursts of ``burst`` through ``report_many``: the
     records per commit of ``burst`` synchronous threads, without a thread per report (the
     ROS node and the HTTP API take the requests queued behind one this way)."""
-    ledger = FaultLedger.open(url_for(db), policy=Policy())
-    try:
-        ledger.report("BENCH_WARMUP", "FAILED", severity=2, source_id="/bench/warmup")
-        requests = [ReportRequest(code, kind, 2, "bench", source) for code, kind, source in work]
-        seq0, commits0 = ledger.last_seq, ledger._writer.commits
+    requests = [ReportRequest(code, kind, 2, "bench", source) for code, kind, source in work]
+
+    def send(ledger: FaultLedger) -> tuple[float, list[float]]:
         latencies: list[float] = []
-        cpu0, used0, start = time.process_time(), usage_since(), time.perf_counter()
+        start = time.perf_counter()
         for first in range(0, len(requests), burst):
             t0 = time.perf_counter()
             results = ledger.report_many(requests[first:first + burst])
             latencies.append(time.perf_counter() - t0)
             if not all(result.accepted for result in results):
                 raise SystemExit("a report was rejected")
-        seconds, cpu = time.perf_counter() - start, time.process_time() - cpu0
-        return Run(f"FaultLedger, 1 caller, bursts of {burst}", len(work),
-                   ledger.last_seq - seq0, seconds, ledger._writer.commits - commits0,
-                   latencies, cpu, usage_since(used0))
-    finally:
-        ledger.close()
+        return time.perf_counter() - start, latencies
+
+    return measure_ledger(f"FaultLedger, 1 caller, bursts of {burst}", len(work), db, send)
 
 
 # -- (a) raw sqlite3, one commit per row ---------------------------------------------------------
