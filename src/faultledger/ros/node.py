@@ -217,8 +217,9 @@ class FaultManagerNode:
                                 qos_profile=SERVICE_QOS, callback_group=self.read_group)
             for kind, name, callback in reads)]
         self._unpublished: deque[Notification] = deque()
-        self._publish_now = node.create_guard_condition(
-            guard_callback(self._publish_queued, self.log, "events publisher"))
+        self._publish_guarded = guard_callback(self._publish_queued, self.log,
+                                               "events publisher")
+        self._publish_now = node.create_guard_condition(self._publish_guarded)
         self.subscription = ledger.subscribe(self.publish)
 
     def _refuse_write(self, name: str) -> ServiceCallback:
@@ -406,7 +407,7 @@ class FaultManagerNode:
     def close(self) -> None:
         """Once the executor stopped (``serve`` first lets reads in flight finish)."""
         self.subscription.cancel()
-        guard_callback(self._publish_queued, self.log, "events publisher")()
+        self._publish_guarded()
         self.reads.close()
         for service in self.services:
             self.node.destroy_service(service)
