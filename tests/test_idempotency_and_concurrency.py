@@ -30,7 +30,7 @@ def run_threads(count: int, target: Callable[[int], None]) -> None:
         except BaseException as error:  # surfaced in the test thread below
             errors.append(error)
 
-    threads = [threading.Thread(target=body, args=(n,)) for n in range(count)]
+    threads = [threading.Thread(target=body, args=(n,), daemon=True) for n in range(count)]
     for thread in threads:
         thread.start()
     for thread in threads:
@@ -201,6 +201,35 @@ def test_log_written_by_eight_threads_verifies(tmp_path: Path) -> None:
         assert report.ok, report.problems
         assert report.records == THREADS * PER_THREAD + 2  # and the identity, the policy
         assert ledger.all_faults() == ledger.state_at(ledger.last_seq)
+
+
+def test_single_reports_and_batches_from_many_threads_are_all_answered(tmp_path: Path) -> None:
+    """Callers answered by one commit are woken one by the other: none may be left waiting,
+    whether it sent one report or a batch (whose reports may span several commits)."""
+    answered: dict[int, list[ReportResult]] = {}
+
+    with FaultLedger.open(url(tmp_path), background=False) as ledger:
+
+        def worker(n: int) -> None:
+            mine: list[ReportResult] = []
+            for i in range(60):
+                if n % 2:
+                    mine.append(ledger.report(f"CODE_{n}_{i % 7}", "FAILED", 1, "", f"/r/{n}"))
+                else:
+                    mine.extend(ledger.report_many([
+                        ReportRequest(f"CODE_{n}_{(i + k) % 7}", "FAILED", 1, "", f"/r/{n}")
+                        for k in range(1 + i % 9)]))
+            answered[n] = mine
+
+        run_threads(THREADS, worker)
+        last = ledger.last_seq
+        history = ledger.history()
+    sent = sum(60 if n % 2 else sum(1 + i % 9 for i in range(60)) for n in range(THREADS))
+    answers = [r for per in answered.values() for r in per]
+    assert len(answers) == sent
+    assert all(r.accepted for r in answers)
+    assert sorted(r.seq or 0 for r in answers) == list(range(3, last + 1))
+    assert [r.seq for r in history] == list(range(1, last + 1))
 
 
 def test_concurrent_reports_and_clears_keep_state_equal_to_replay(tmp_path: Path) -> None:
