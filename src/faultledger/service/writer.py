@@ -160,7 +160,7 @@ class _Caller:
     wake: threading.Lock = field(default_factory=_held_lock)
     """Released once: when all its commands are answered, or when it is made leader."""
     then: _Caller | None = None
-    """Answered by the same commit: woken by this caller as it leaves ``submit_all``."""
+    """Answered by the same commit: woken by this caller as soon as its own wait returns."""
 
 
 @dataclass(slots=True)
