@@ -311,10 +311,8 @@ class Writer:
             self._leading = True
         if follow:
             caller.wake.acquire()  # all answered, or handed the leadership
-            then = caller.then  # the next caller answered by the same commit, if any
-            if then is not None:
-                caller.then = None
-                then.wake.release()
+            if caller.then is not None:  # the next caller answered by the same commit
+                caller.then.wake.release()
         if not last.done:
             self._lead(last)
         with self._mutex:
