@@ -7,7 +7,7 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from faultledger.domain.events import FaultReported, LogRecord
+from faultledger.domain.events import FaultCleared, FaultReported, LogRecord
 from faultledger.domain.projector import Projector
 from faultledger.domain.statistics import StatsFold, StatsOutput
 from faultledger.domain.types import EventType
@@ -71,3 +71,21 @@ def test_a_rollback_after_a_take_in_the_group_drops_only_what_followed(
     output, tracks = state(projector)
     assert output == StatsOutput([], [], [], {}, [], [], [])
     assert tracks == tracks_before
+
+
+def test_a_rolled_back_clear_leaves_the_episode_it_ended_open() -> None:
+    """An episode confirmed in an earlier (unsaved) group and ended by a clear in the failed
+    group: the clear rewrites the episode in the fold's output in place, and the rollback
+    must put back the open one (else the next save writes an episode ended by a record the
+    log never kept)."""
+    projector = folded([(0, True, 2)])
+    assert projector.stats is not None
+    assert [e.end_seq for e in projector.stats.peek().started] == [None]
+    expected = state(projector)
+    projector.stage()
+    projector.apply(LogRecord(2, "id-2", FaultCleared("CODE_0", "operator", "fixed"),
+                              2 * SECOND, 2 * SECOND))
+    assert [e.end_seq for e in projector.stats.peek().started] == [2]  # ended in place
+    projector.rollback()
+    assert [e.end_seq for e in projector.stats.peek().started] == [None]
+    assert state(projector) == expected

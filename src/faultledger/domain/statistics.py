@@ -158,6 +158,9 @@ class StatsFold:
         """While staged: each code's entry in the output's tracks before the stage touched it
         (None: it had none). An undo log, not a copy: staging costs nothing however many
         codes the output holds."""
+        self._replaced: list[tuple[int, Episode]] = []
+        """While staged: (index, episode before) of the output's started episodes the stage
+        ended in place (``_replace_started``), so a rollback restores them."""
 
     def track(self, code: str) -> CodeTrack:
         if self._staged is not None and code in self._staged:
@@ -184,6 +187,7 @@ class StatsFold:
         self._staged = None
         self._saved_len = None
         self._undo = {}
+        self._replaced = []
 
     def rollback(self) -> None:
         if self._saved_len is not None:
@@ -200,10 +204,14 @@ class StatsFold:
                     del tracks[code]
                 else:
                     tracks[code] = before
+            for index, episode in reversed(self._replaced):
+                if index < started:
+                    self._out.started[index] = episode
             self._started_at = {e.start_seq: i for i, e in enumerate(self._out.started)}
         self._staged = None
         self._saved_len = None
         self._undo = {}
+        self._replaced = []
 
     def peek(self) -> StatsOutput:
         """What was produced since the last ``take``, staged part included, kept: saved
@@ -218,6 +226,7 @@ class StatsFold:
         if self._saved_len is not None:
             self._saved_len = (0, 0, 0, 0, 0, 0)
             self._undo = {}
+            self._replaced = []
         return out
 
     def _put(self, code: str, track: CodeTrack) -> None:
@@ -308,6 +317,8 @@ class StatsFold:
         """An episode that starts and ends in one output is written once, ended."""
         index = self._started_at.get(ended.start_seq)
         if index is not None:
+            if self._saved_len is not None:
+                self._replaced.append((index, self._out.started[index]))
             self._out.started[index] = ended
 
 
