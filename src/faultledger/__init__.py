@@ -5,6 +5,10 @@ its methods take and return, and every exception it may raise (all are ``FaultLe
 ``reason`` tells them apart by kind, as the results' ``reason`` does).
 """
 
+from faultledger import compiled as _compiled
+
+_compiled.drop_stale()  # before any compiled module is imported (a checkout only)
+
 from faultledger.domain.events import LogRecord
 from faultledger.domain.fault import Fault
 from faultledger.domain.identity import LedgerIdentity

@@ -77,8 +77,8 @@ def append_verbatim(conn: Connection, records: Sequence[PushedRecord]) -> None:
 
 def hashes_between(conn: Connection, first_seq: int, last_seq: int) -> dict[int, str]:
     """Stored hashes of records first_seq..last_seq."""
-    rows = conn.execute(select(events.c.seq, events.c.hash).where(
-        events.c.seq >= first_seq, events.c.seq <= last_seq))
+    rows: Any = conn.execute(select(events.c.seq, events.c.hash).where(  # Rows, not tuples
+        events.c.seq >= first_seq, events.c.seq <= last_seq))  # (compiled code checks)
     return {int(seq): str(digest) for seq, digest in rows}
 
 
