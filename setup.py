@@ -29,6 +29,7 @@ COMPILED = [
     "src/faultledger/domain/types.py",
     "src/faultledger/service/event_ids.py",
     "src/faultledger/service/telemetry.py",
+    "src/faultledger/service/writer.py",
     "src/faultledger/store/event_log.py",
     "src/faultledger/store/fastpath.py",
 ]

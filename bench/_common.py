@@ -146,4 +146,14 @@ def revision() -> str:
 def header(title: str) -> None:
     print(f"== {title}")
     print(f"   machine: {machine()}")
-    print(f"   code:    faultledger {revision()}, {sys.executable}")
+    print(f"   code:    faultledger {revision()}, {sys.executable}, {compiled_modules()}")
+
+
+def compiled_modules() -> str:
+    """How many of the per-record modules run compiled (docs/architecture.md)."""
+    from faultledger import compiled
+
+    running = sum(1 for name in compiled.MODULES if compiled.built(name))
+    if not running:
+        return "plain Python (nothing compiled)"
+    return f"{running}/{len(compiled.MODULES)} per-record modules compiled (mypyc)"

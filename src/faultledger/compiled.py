@@ -26,6 +26,7 @@ MODULES = (
     "faultledger.domain.types",
     "faultledger.service.event_ids",
     "faultledger.service.telemetry",
+    "faultledger.service.writer",
     "faultledger.store.event_log",
     "faultledger.store.fastpath",
 )

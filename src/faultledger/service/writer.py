@@ -63,6 +63,10 @@ log = logging.getLogger(__name__)
 
 GATHER_WAIT_S = 0.0003
 
+recorded_clock = time.time_ns
+"""The wall clock that stamps ``recorded_at`` (a test replaces it to write a log of the
+past; a module variable, so that also works when this module is compiled)."""
+
 
 @dataclass(frozen=True, slots=True)
 class Report:
@@ -468,7 +472,7 @@ class Writer:
         """
         projector = self.projector
         projector.stage()
-        batch = _Batch(projector, time.time_ns(), self.robot_id)
+        batch = _Batch(projector, recorded_clock(), self.robot_id)
         saved = False
         try:
             kinds = {type(p.command) for p in group}
