@@ -1,8 +1,9 @@
 """Build hook: the per-record modules compiled to C with mypyc where a compiler is at hand.
 
 Every report and every replayed record runs through the same few modules (the DEM state
-machine, the statistics fold, the record codec, validation). Compiled, they cost about a
-third less CPU (docs/performance.md, "Compiled hot path"); everything else stays Python.
+machine, the statistics fold, the record codec, the group commit). Compiled, they cost about
+a third less CPU (docs/architecture.md, "Compiled per-record modules"; docs/performance.md,
+"Sixth round"); everything else, and all code that meets raw input, stays Python.
 The compiled modules are the same source files, type-checked by mypy: nothing is written
 twice. Set FAULTLEDGER_PURE_PYTHON=1 to install without compiling (a robot without a C
 compiler gets the pure-Python package by itself: the build falls back when compiling fails).
