@@ -82,9 +82,24 @@ def _episode(row: Any) -> Episode:
                    row.end_seq, row.end_ns)
 
 
-def _sum_rows(output: StatsOutput, unit_ns: int, key: str) -> list[dict[str, Any]]:
+def _flag_sums(facts: Sequence[StatFact]) -> dict[int, list[int]]:
+    """Per minute (``at_ns // NS_PER_MINUTE``), the sum of each of STAT_FLAGS over the facts:
+    one pass over the facts serves the minute and the hour sums alike."""
+    facts_in: dict[int, list[StatFact]] = {}
+    for fact in facts:
+        facts_in.setdefault(fact.at_ns // NS_PER_MINUTE, []).append(fact)
+    sums: dict[int, list[int]] = {}
+    for minute, group in facts_in.items():  # a save holds ~1,000 facts: sum columns, not flags
+        columns = list(zip(*group, strict=True))
+        sums[minute] = [sum(columns[field]) for field in _FLAG_FIELDS]
+    return sums
+
+
+def _sum_rows(output: StatsOutput, flag_sums: dict[int, list[int]], unit_ns: int,
+              key: str) -> list[dict[str, Any]]:
     """Per-minute (per-hour) increments of one output: ``key`` is ``at_ns // unit_ns``,
-    offsets are within that minute (hour)."""
+    offsets are within that minute (hour). ``flag_sums``: ``_flag_sums`` of its facts (a
+    minute lies within one hour, so an hour's flags are the sum of its minutes')."""
     sums: dict[int, dict[str, int]] = {}
 
     def bucket(at_ns: int) -> tuple[int, dict[str, int]]:
@@ -99,14 +114,10 @@ def _sum_rows(output: StatsOutput, unit_ns: int, key: str) -> list[dict[str, Any
     for goal in output.goals:
         _, row = bucket(goal.at_ns)
         row[GOAL_METRIC_OF[goal.status]] += 1
-    facts_in: dict[int, list[StatFact]] = {}
-    for fact in output.facts:
-        facts_in.setdefault(fact.at_ns // unit_ns, []).append(fact)
-    for unit, facts in facts_in.items():  # a save holds ~1,000 facts: sum columns, not flags
-        _, row = bucket(unit * unit_ns)
-        columns = list(zip(*facts, strict=True))
-        for flag, field in zip(STAT_FLAGS, _FLAG_FIELDS, strict=True):
-            row[flag] += sum(columns[field])
+    for minute, flags in flag_sums.items():
+        _, row = bucket(minute * NS_PER_MINUTE)
+        for flag, value in zip(STAT_FLAGS, flags, strict=True):
+            row[flag] += value
     for episode in output.started:
         unit, row = bucket(episode.start_ns)
         row["starts"] += 1
@@ -121,14 +132,6 @@ def _sum_rows(output: StatsOutput, unit_ns: int, key: str) -> list[dict[str, Any
         row["repairs"] += 1
         row["repair_ns"] += episode.repair_ns
     return [{key: unit, **row} for unit, row in sums.items()]
-
-
-def _minute_rows(output: StatsOutput) -> list[dict[str, Any]]:
-    return _sum_rows(output, NS_PER_MINUTE, "minute")
-
-
-def _hour_rows(output: StatsOutput) -> list[dict[str, Any]]:
-    return _sum_rows(output, NS_PER_HOUR, "hour")
 
 
 def _track_row(code: str, track: CodeTrack) -> dict[str, Any]:
@@ -149,8 +152,11 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
     episodes.update((e.start_seq, e) for e in output.ended)
     fastpath.execute_many(conn, upsert(stat_episodes, dialect),
                           [_episode_row(e) for e in episodes.values()])
-    fastpath.execute_many(conn, upsert_add(stat_minutes, dialect), _minute_rows(output))
-    fastpath.execute_many(conn, upsert_add(stat_hours, dialect), _hour_rows(output))
+    flags = _flag_sums(output.facts)
+    fastpath.execute_many(conn, upsert_add(stat_minutes, dialect),
+                          _sum_rows(output, flags, NS_PER_MINUTE, "minute"))
+    fastpath.execute_many(conn, upsert_add(stat_hours, dialect),
+                          _sum_rows(output, flags, NS_PER_HOUR, "hour"))
     fastpath.execute_many(conn, upsert(stat_codes, dialect),
                           [_track_row(code, t) for code, t in output.tracks.items()])
     fastpath.insert_tuples(conn, stat_operator, _OPERATOR_COLUMNS, output.operator)
@@ -538,12 +544,14 @@ def differences(conn: Connection, replayed: StatsOutput) -> list[str]:
     stored_episodes = {row.start_seq: _episode(row) for row in conn.execute(select(stat_episodes))}
     if stored_episodes != episodes:
         problems.append("stat_episodes")
-    expected_minutes = {row["minute"]: row for row in _minute_rows(replayed)}
+    flags = _flag_sums(replayed.facts)
+    expected_minutes = {row["minute"]: row
+                        for row in _sum_rows(replayed, flags, NS_PER_MINUTE, "minute")}
     stored_minutes = {row["minute"]: dict(row) for row in conn.execute(
         select(stat_minutes)).mappings()}
     if stored_minutes != expected_minutes:
         problems.append("stat_minutes")
-    expected_hours = {row["hour"]: row for row in _hour_rows(replayed)}
+    expected_hours = {row["hour"]: row for row in _sum_rows(replayed, flags, NS_PER_HOUR, "hour")}
     stored_hours = {row["hour"]: dict(row) for row in conn.execute(
         select(stat_hours)).mappings()}
     if stored_hours != expected_hours:
