@@ -36,12 +36,16 @@ _SOURCES = Path(__file__).resolve().parent.parent
 """The directory holding the ``faultledger`` package (``src`` in a checkout)."""
 
 
+def _source(module: str) -> Path:
+    return _SOURCES / (module.replace(".", "/") + ".py")
+
+
 def built(module: str) -> list[Path]:
     """The compiled files of ``module`` beside its source (none: it runs as Python)."""
-    source = _SOURCES / (module.replace(".", "/") + ".py")
-    return [source.with_name(source.stem + suffix)
-            for suffix in machinery.EXTENSION_SUFFIXES
-            if source.with_name(source.stem + suffix).exists()]
+    source = _source(module)
+    candidates = (source.with_name(source.stem + suffix)
+                  for suffix in machinery.EXTENSION_SUFFIXES)
+    return [path for path in candidates if path.exists()]
 
 
 def active() -> list[str]:
@@ -59,9 +63,8 @@ def stale() -> list[str]:
     """Compiled modules older than their source."""
     found = []
     for module in MODULES:
-        source = _SOURCES / (module.replace(".", "/") + ".py")
         try:
-            changed = source.stat().st_mtime
+            changed = _source(module).stat().st_mtime
         except OSError:
             continue
         if any(path.stat().st_mtime < changed for path in built(module)):
