@@ -6,7 +6,8 @@ ROS_STAMP := $(VENV)/.ros-installed
 STAMP  := $(VENV)/.installed
 DEV_STAMP := $(VENV)/.dev-installed
 COMPILED_STAMP := $(VENV)/.compiled
-COMPILED_SOURCES := $(shell grep -o 'src/faultledger/[a-z_/]*\.py' setup.py)
+# faultledger/compiled.py's MODULES, as files: what setup.py compiles.
+COMPILED_SOURCES := $(patsubst %,src/%.py,$(subst .,/,$(shell sed -n 's/^    "\(faultledger\.[a-z_.]*\)",$$/\1/p' src/faultledger/compiled.py)))
 
 .PHONY: run test lint typecheck unit unit-postgresql ros-tests interfaces setup setup-dev compile bench venv clean
 

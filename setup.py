@@ -11,30 +11,26 @@ compiler gets the pure-Python package by itself: the build falls back when compi
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import sys
+from pathlib import Path
 
 from setuptools import setup
 from setuptools.command.build_ext import build_ext
 
-COMPILED = [
-    "src/faultledger/domain/debounce.py",
-    "src/faultledger/domain/events.py",
-    "src/faultledger/domain/fault.py",
-    "src/faultledger/domain/identity.py",
-    "src/faultledger/domain/integrity.py",
-    "src/faultledger/domain/notifications.py",
-    "src/faultledger/domain/projector.py",
-    "src/faultledger/domain/statistics.py",
-    "src/faultledger/domain/transition.py",
-    "src/faultledger/domain/types.py",
-    "src/faultledger/service/event_ids.py",
-    "src/faultledger/service/telemetry.py",
-    "src/faultledger/service/writer.py",
-    "src/faultledger/store/event_log.py",
-    "src/faultledger/store/fastpath.py",
-]
-"""Keep in step with faultledger/compiled.py (MODULES), which tests compare with this list."""
+ROOT = Path(__file__).resolve().parent
+
+
+def compiled_sources() -> list[str]:
+    """The source files of faultledger/compiled.py's MODULES, the one list of what is
+    compiled (read from the file: the package itself cannot be imported while it builds)."""
+    spec = importlib.util.spec_from_file_location(
+        "faultledger_compiled", ROOT / "src" / "faultledger" / "compiled.py")
+    assert spec is not None and spec.loader is not None
+    listing = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(listing)
+    return [f"src/{name.replace('.', '/')}.py" for name in listing.MODULES]
 
 
 class BuildOrFallBack(build_ext):
@@ -68,7 +64,7 @@ def extensions() -> list[object]:
     # requirements (no pydantic for its plugin, no SQLAlchemy), so what the compiled modules
     # import from other packages is typed Any there, the same in every build.
     options = [f"--config-file={os.devnull}", "--ignore-missing-imports"]
-    return list(mypycify([*options, *COMPILED], opt_level="3"))
+    return list(mypycify([*options, *compiled_sources()], opt_level="3"))
 
 
 setup(ext_modules=extensions(), cmdclass={"build_ext": BuildOrFallBack})

@@ -150,7 +150,8 @@ def header(title: str) -> None:
 
 
 def compiled_modules() -> str:
-    """How many of the per-record modules run compiled (docs/architecture.md)."""
+    """How many of the per-record modules have compiled files beside the imported sources
+    (stale ones are removed at import: docs/architecture.md)."""
     from faultledger import compiled
 
     running = sum(1 for name in compiled.MODULES if compiled.built(name))

@@ -30,7 +30,7 @@ MODULES = (
     "faultledger.store.event_log",
     "faultledger.store.fastpath",
 )
-"""setup.py's COMPILED, as module names (tests/test_compiled.py keeps the two the same)."""
+"""What setup.py compiles (it reads this list; so does the Makefile's ``compile``)."""
 
 _SOURCES = Path(__file__).resolve().parent.parent
 """The directory holding the ``faultledger`` package (``src`` in a checkout)."""
