@@ -30,20 +30,20 @@ $(ROS_STAMP): requirements-ros.txt | $(PYVENV)
 	@$(TIMED) "pip install -r requirements-ros.txt (ROS 2 Jazzy wheels)" $(PIP) -r requirements-ros.txt
 	@touch $(ROS_STAMP)
 
-# The project alone for `make run`; with its dev tools (tests, linters) for `make test`.
+# The project alone for `make run`; with its dev tools (tests, linters) for `make test`. Both
+# compile the per-record modules with mypyc (setup.py; pure Python where no C compiler is).
 $(STAMP): pyproject.toml setup.py $(ROS_STAMP)
 	@$(TIMED) "pip install -e . (the project)" $(PIP) -e .
-	@touch $(STAMP)
+	@touch $(STAMP) $(COMPILED_STAMP)
 
 $(DEV_STAMP): pyproject.toml setup.py $(ROS_STAMP)
 	@$(TIMED) "pip install -e .[dev] (the project and its dev tools)" $(PIP) -e ".[dev]"
-	@touch $(STAMP) $(DEV_STAMP)
+	@touch $(STAMP) $(DEV_STAMP) $(COMPILED_STAMP)
 
-# Opt-in: the per-record modules compiled with mypyc (setup.py; docs/architecture.md). Again
-# whenever one of their sources changed (meanwhile the checkout runs the sources:
-# faultledger/compiled.py drops compiled modules older than their source).
+# A compiled module's source changed since the install: compile again. (Meanwhile the checkout
+# runs the sources: faultledger/compiled.py drops compiled modules older than their source.)
 $(COMPILED_STAMP): $(COMPILED_SOURCES) | $(STAMP)
-	@$(TIMED) "compile the per-record modules (mypyc)" env FAULTLEDGER_COMPILE=1 $(PIP) --no-deps -e .
+	@$(TIMED) "pip install -e . (compile the per-record modules again)" $(PIP) --no-deps -e .
 	@touch $(COMPILED_STAMP)
 
 compile: $(COMPILED_STAMP)
@@ -62,10 +62,10 @@ setup: $(ROS_STAMP)
 setup-dev: $(ROS_STAMP)
 	@$(MAKE) --no-print-directory -j2 interfaces $(DEV_STAMP)
 
-run: setup
+run: setup compile
 	scripts/run-demo
 
-test: setup-dev lint typecheck unit unit-postgresql ros-tests
+test: setup-dev compile lint typecheck unit unit-postgresql ros-tests
 
 lint: $(DEV_STAMP)
 	$(BIN)/ruff check src tests bench interfaces setup.py

@@ -1,13 +1,12 @@
-"""Build hook: the per-record modules compiled to C with mypyc, on request.
+"""Build hook: the per-record modules compiled to C with mypyc where a compiler is at hand.
 
 Every report and every replayed record runs through the same few modules (the DEM state
 machine, the statistics fold, the record codec, the group commit). Compiled, they cost about
 a third less CPU (docs/architecture.md, "Compiled per-record modules"; docs/performance.md,
 "Sixth round"); everything else, and all code that meets raw input, stays Python.
-FAULTLEDGER_COMPILE=1 compiles them (``make compile``); the default install is plain Python,
-because compiled code keeps the interpreter lock through long loops and a report then waits
-behind a long statistics query (tests/ros/test_read_pool.py). Where compiling fails (no C
-compiler) the install goes on in plain Python.
+The compiled modules are the same source files, type-checked by mypy: nothing is written
+twice. Set FAULTLEDGER_PURE_PYTHON=1 to install without compiling (a robot without a C
+compiler gets the pure-Python package by itself: the build falls back when compiling fails).
 """
 
 from __future__ import annotations
@@ -54,7 +53,7 @@ class BuildOrFallBack(build_ext):
 
 
 def extensions() -> list[object]:
-    if os.environ.get("FAULTLEDGER_COMPILE") != "1":
+    if os.environ.get("FAULTLEDGER_PURE_PYTHON") == "1":
         return []
     try:
         from mypyc.build import mypycify
