@@ -7,6 +7,7 @@ from pathlib import Path
 
 from faultledger.ros.dds_profile import (
     ANNOUNCE_SEC,
+    ANSWER_HEARTBEAT_SEC,
     CWD_PROFILE,
     PROFILE,
     PROFILE_ENV,
@@ -26,6 +27,18 @@ def test_the_shipped_profile_announces_as_documented() -> None:
     seconds = int(announce.findtext("dds:sec", "0", NS)) + int(
         announce.findtext("dds:nanosec", "0", NS)) / 1e9
     assert seconds == ANNOUNCE_SEC
+
+
+def test_the_service_answers_are_repaired_within_the_documented_heartbeat() -> None:
+    """rmw_fastrtps gives every service's reply writer the profile named "service"."""
+    root = ET.parse(PROFILE).getroot()
+    [writer] = [w for w in root.findall("dds:profiles/dds:data_writer", NS)
+                if w.get("profile_name") == "service"]
+    period = writer.find("dds:times/dds:heartbeatPeriod", NS)
+    assert period is not None
+    seconds = int(period.findtext("dds:sec", "0", NS)) + int(
+        period.findtext("dds:nanosec", "0", NS)) / 1e9
+    assert seconds == ANSWER_HEARTBEAT_SEC
 
 
 def test_used_by_default(tmp_path: Path) -> None:
