@@ -181,7 +181,7 @@ _TABLES = (stat_facts, stat_episodes, stat_minutes, stat_hours, stat_codes, stat
 
 def loading(conn: Connection) -> AbstractContextManager[None]:
     """Around a save that fills emptied statistics (a replay of the whole log)."""
-    return bulk_load(conn, _TABLES)
+    return bulk_load(conn, _TABLES, appended=(stat_facts,))  # one fact per record
 
 
 def checkpoint_seq(conn: Connection) -> int:
