@@ -60,12 +60,22 @@ class Central:
         return central
 
     def token(self, name: str, role: str) -> str:
-        """A token made on the central with `faultledger token create` (a running central
-        follows its token file)."""
+        """A token made on the central with `faultledger token create`. A running central
+        reads its token file again every second ("accepts it within 2 s", says the
+        command): the token is returned once the central accepts it, as a script would
+        wait, so that a client started at once is not refused."""
         done = run_cli("token", "create", "--name", name, "--role", role, "--file",
                        str(self.tokens))
         assert done.returncode == 0, done.stderr
-        return done.stdout.strip()
+        token = done.stdout.strip()
+        if self.process is not None and self.process.poll() is None:
+            deadline = time.monotonic() + 10
+            with httpx.Client(base_url=self.url, timeout=5,
+                              headers={"authorization": f"Bearer {token}"}) as web:
+                while web.get("/api/v1/fleet/robots").status_code == 401:
+                    assert time.monotonic() < deadline, f"token {name} not accepted in 10 s"
+                    time.sleep(0.05)
+        return token
 
     def run(self) -> None:
         """Start (again, on the same port once it is known)."""

@@ -237,12 +237,12 @@ class PostgreSQLRules(DialectRules):
         from their own definitions after it, in the same transaction; so is the primary key
         of the ``appended`` tables. The rows the rebuild deleted are still in the table
         until a vacuum, and each new row's key was checked against the dead one of the same
-        seq: a million statistics facts took 3.6 s to COPY, 1.0 s without the indexes
+        seq: a million statistics facts took 3.6 s to COPY, 1.8 s without the indexes
         (docs/performance.md, "Seventh round").
 
         The price: DROP INDEX locks the table exclusively until the commit, so readers of
-        these tables wait for the load (2-3 s per million records here) instead of reading
-        the snapshot before it. Writers wait for the whole rebuild anyway."""
+        these tables wait for the load (about 5 s per million records here) instead of
+        reading the snapshot before it. Writers wait for the whole rebuild anyway."""
         from psycopg import sql
 
         driver: Any = conn.connection.driver_connection
