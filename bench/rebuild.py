@@ -13,6 +13,7 @@ import json
 import sqlite3
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from _common import (
@@ -168,18 +169,37 @@ def time_rebuild(url: str) -> tuple[int, float]:
         ledger.close()
 
 
-def measure(db: Path) -> None:
+def alternating(rounds: int, baseline: Callable[[], tuple[int, float]],
+                rebuild: Callable[[], tuple[int, float]]
+                ) -> tuple[tuple[int, float], tuple[int, float]]:
+    """``rounds`` alternating runs of the baseline and the rebuild, each round printed; the
+    median round of each (by time), so that one slow moment of the VM does not decide."""
+    bases: list[tuple[int, float]] = []
+    rebuilds: list[tuple[int, float]] = []
+    for number in range(1, rounds + 1):
+        bases.append(baseline())
+        rebuilds.append(rebuild())
+        if rounds > 1:
+            print(f"   round {number}: baseline {bases[-1][0] / bases[-1][1]:,.0f} events/s, "
+                  f"rebuild {rebuilds[-1][0] / rebuilds[-1][1]:,.0f} events/s", flush=True)
+    middle = len(bases) // 2
+    return (sorted(bases, key=lambda r: r[1])[middle],
+            sorted(rebuilds, key=lambda r: r[1])[middle])
+
+
+def measure(db: Path, rounds: int) -> None:
     column = payload_column(db)
     assert column == 5, f"payload is column {column}; adjust baseline_read"
     baseline_read(db)  # warm the page cache so both sides read from memory
-    base_n, base_s = baseline_read(db)
-    replayed, seconds = time_rebuild(url_for(db))
-    rate, base_rate = replayed / seconds, base_n / base_s
     print()
+    (base_n, base_s), (replayed, seconds) = alternating(
+        rounds, lambda: baseline_read(db), lambda: time_rebuild(url_for(db)))
+    rate, base_rate = replayed / seconds, base_n / base_s
+    kept = f", median of {rounds} rounds" if rounds > 1 else ""
     print(f"   baseline: sqlite3 SELECT * + json.loads   {base_rate:>12,.0f} events/s "
-          f"({base_n:,} rows in {base_s:.2f} s)")
+          f"({base_n:,} rows in {base_s:.2f} s{kept})")
     print(f"   FaultLedger.rebuild()                       {rate:>12,.0f} events/s "
-          f"({replayed:,} records in {seconds:.2f} s)")
+          f"({replayed:,} records in {seconds:.2f} s{kept})")
     facts, facts_s = facts_write(db, db.with_name(db.name + ".facts"))
     print(f"   raw sqlite3 insert of its {facts:,} statistics facts "
           f"{facts / facts_s:>8,.0f} rows/s ({facts_s:.2f} s; one fact per report, "
@@ -240,20 +260,21 @@ def baseline_read_postgresql(url: str) -> tuple[int, float]:
     return count, time.perf_counter() - start
 
 
-def measure_postgresql(db: Path) -> None:
+def measure_postgresql(db: Path, rounds: int) -> None:
+    print()
     with pg_server.running() as server:
         url = server.database("rebuild")
         copied = copy_to_postgresql(db, url)
         baseline_read_postgresql(url)  # warm the server's cache
-        base_n, base_s = baseline_read_postgresql(url)
-        replayed, seconds = time_rebuild(url)
+        (base_n, base_s), (replayed, seconds) = alternating(
+            rounds, lambda: baseline_read_postgresql(url), lambda: time_rebuild(url))
     assert replayed == copied == base_n, (replayed, copied, base_n)
     rate, base_rate = replayed / seconds, base_n / base_s
-    print()
+    kept = f", median of {rounds} rounds" if rounds > 1 else ""
     print(f"   PostgreSQL: psycopg SELECT * + json.loads {base_rate:>12,.0f} events/s "
-          f"({base_n:,} rows in {base_s:.2f} s)")
+          f"({base_n:,} rows in {base_s:.2f} s{kept})")
     print(f"   PostgreSQL: FaultLedger.rebuild()           {rate:>12,.0f} events/s "
-          f"({replayed:,} records in {seconds:.2f} s)")
+          f"({replayed:,} records in {seconds:.2f} s{kept})")
     print(f"   PostgreSQL rebuild vs baseline               {ratio(rate, base_rate):>10.2f}x   "
           f"target >= {TARGET_RATIO}x  {verdict(rate / base_rate >= TARGET_RATIO)}")
     print(f"   PostgreSQL rebuild absolute (events/s)       {rate:>10,.0f}   target >= "
@@ -273,25 +294,29 @@ def main() -> None:
                              "large enough; startup.py --db PATH reads it)")
     parser.add_argument("--postgresql", action="store_true",
                         help="also measure the rebuild of the same log on PostgreSQL")
+    parser.add_argument("--rounds", type=int, default=None,
+                        help="alternating rounds of the baseline and the rebuild, median kept "
+                             "(default 3, --quick 1)")
     args = parser.parse_args()
     reports = args.reports or (100_000 if args.quick else 1_000_000)
+    rounds = max(1, args.rounds or (1 if args.quick else 3))
     header(f"rebuild: replay of a {reports:,}-report log over {args.codes:,} codes")
     if args.keep is not None:
         db = args.keep.resolve()
         db.parent.mkdir(parents=True, exist_ok=True)
         ensure_log(db, reports, args.codes, args.threads)
-        measure(db)
+        measure(db, rounds)
         if args.postgresql:
-            measure_postgresql(db)
+            measure_postgresql(db, rounds)
         print(f"   kept {db} (delete it when done: rm {db}*)")
         return
     SCRATCH.mkdir(parents=True, exist_ok=True)
     with scratch_dir("rebuild-") as workdir:
         db = workdir / "log.db"
         build_log(db, reports, args.codes, args.threads)
-        measure(db)
+        measure(db, rounds)
         if args.postgresql:
-            measure_postgresql(db)
+            measure_postgresql(db, rounds)
 
 
 if __name__ == "__main__":
