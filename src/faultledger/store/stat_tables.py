@@ -134,6 +134,14 @@ def _sum_rows(output: StatsOutput, flag_sums: dict[int, list[int]], unit_ns: int
     return [{key: unit, **row} for unit, row in sums.items()]
 
 
+def _minute_and_hour_rows(output: StatsOutput
+                          ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The per-minute and per-hour increments of one output, its facts summed once."""
+    flags = _flag_sums(output.facts)
+    return (_sum_rows(output, flags, NS_PER_MINUTE, "minute"),
+            _sum_rows(output, flags, NS_PER_HOUR, "hour"))
+
+
 def _track_row(code: str, track: CodeTrack) -> dict[str, Any]:
     return {
         "fault_code": code,
@@ -152,11 +160,9 @@ def save(conn: Connection, output: StatsOutput, seq: int) -> None:
     episodes.update((e.start_seq, e) for e in output.ended)
     fastpath.execute_many(conn, upsert(stat_episodes, dialect),
                           [_episode_row(e) for e in episodes.values()])
-    flags = _flag_sums(output.facts)
-    fastpath.execute_many(conn, upsert_add(stat_minutes, dialect),
-                          _sum_rows(output, flags, NS_PER_MINUTE, "minute"))
-    fastpath.execute_many(conn, upsert_add(stat_hours, dialect),
-                          _sum_rows(output, flags, NS_PER_HOUR, "hour"))
+    minutes, hours = _minute_and_hour_rows(output)
+    fastpath.execute_many(conn, upsert_add(stat_minutes, dialect), minutes)
+    fastpath.execute_many(conn, upsert_add(stat_hours, dialect), hours)
     fastpath.execute_many(conn, upsert(stat_codes, dialect),
                           [_track_row(code, t) for code, t in output.tracks.items()])
     fastpath.insert_tuples(conn, stat_operator, _OPERATOR_COLUMNS, output.operator)
@@ -544,14 +550,13 @@ def differences(conn: Connection, replayed: StatsOutput) -> list[str]:
     stored_episodes = {row.start_seq: _episode(row) for row in conn.execute(select(stat_episodes))}
     if stored_episodes != episodes:
         problems.append("stat_episodes")
-    flags = _flag_sums(replayed.facts)
-    expected_minutes = {row["minute"]: row
-                        for row in _sum_rows(replayed, flags, NS_PER_MINUTE, "minute")}
+    minutes, hours = _minute_and_hour_rows(replayed)
+    expected_minutes = {row["minute"]: row for row in minutes}
     stored_minutes = {row["minute"]: dict(row) for row in conn.execute(
         select(stat_minutes)).mappings()}
     if stored_minutes != expected_minutes:
         problems.append("stat_minutes")
-    expected_hours = {row["hour"]: row for row in _sum_rows(replayed, flags, NS_PER_HOUR, "hour")}
+    expected_hours = {row["hour"]: row for row in hours}
     stored_hours = {row["hour"]: dict(row) for row in conn.execute(
         select(stat_hours)).mappings()}
     if stored_hours != expected_hours:
