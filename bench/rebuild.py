@@ -139,15 +139,13 @@ def in_memory_floor(url: str, records: int = 200_000) -> tuple[float, float, flo
     ``records`` records read and decoded by the store (timed), then applied in memory by a
     fresh projector with statistics and by one without (timed); seconds per record each."""
     db = Database(url, create=False)
+    gc.disable()  # as the rebuild does (service/restore.py), for the read too
     try:
         with db.reading() as conn:
             start = time.perf_counter()
             log = list(event_log.read(conn, upto_seq=records))
             read_s = time.perf_counter() - start
-    finally:
         db.dispose()
-    gc.disable()  # as the rebuild does (service/restore.py)
-    try:
         start = time.perf_counter()
         Projector(stats=StatsFold()).apply_all(log)
         with_stats = time.perf_counter() - start

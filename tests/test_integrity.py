@@ -5,12 +5,20 @@ definition, ``canonical_json`` of the list, for any text and any numbers."""
 from __future__ import annotations
 
 import hashlib
+import json
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from faultledger.domain.events import FaultCleared, FaultReported
-from faultledger.domain.integrity import GENESIS_HASH, canonical_json, payload_json, record_hash
+from faultledger.domain.integrity import (
+    GENESIS_HASH,
+    canonical_json,
+    parse_json,
+    payload_json,
+    record_hash,
+)
 from faultledger.domain.types import EventType
 
 TEXT = st.text(st.characters(exclude_categories=["Cs"]), max_size=40)  # any UTF-8 text
@@ -60,3 +68,38 @@ def test_other_records_payloads_go_through_the_encoder() -> None:
     assert payload_json(cleared) == canonical_json(cleared.payload())
     assert payload_json(cleared) == '{"actor":"operator\\n","fault_code":"MOTOR_\\"HOT\\"",' \
         '"reason":"ü"}'
+
+
+JSON_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False, allow_infinity=False)
+    | TEXT,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(TEXT, inner, max_size=4),
+    max_leaves=12)
+
+
+def _typed(value: object) -> object:
+    """A value with the type of every part spelled out (1 == 1.0 == True in Python)."""
+    if isinstance(value, dict):
+        return ("dict", [(key, _typed(item)) for key, item in value.items()])
+    if isinstance(value, list):
+        return ("list", [_typed(item) for item in value])
+    return (type(value).__name__, repr(value))
+
+
+@given(value=JSON_VALUES)
+def test_a_canonical_text_reads_as_json_reads_it(value: object) -> None:
+    text = canonical_json(value)
+    assert _typed(parse_json(text)) == _typed(json.loads(text))
+    assert _typed(parse_json(text.encode())) == _typed(json.loads(text))
+
+
+def test_what_the_fast_decoder_refuses_is_read_as_json_reads_it() -> None:
+    for text in ('{"a":NaN}', '[Infinity,-Infinity]', '{"a":1e400}', '"\\ud800"',
+                 '{"big":123456789012345678901234567890}'):
+        assert _typed(parse_json(text)) == _typed(json.loads(text))
+
+
+def test_text_that_is_not_json_is_refused_as_json_refuses_it() -> None:
+    for text in ('{"a":', "", "[1,]", "{'a': 1}"):
+        with pytest.raises(ValueError):
+            parse_json(text)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from faultledger.domain.events import FaultReported
-from faultledger.domain.fault import Fault
+from faultledger.domain.fault import Fault, new_fault
 from faultledger.domain.policy import DebounceParams, Policy
 from faultledger.domain.types import EventType, FaultStatus, Severity
 
@@ -49,7 +49,7 @@ def apply_report(
     if fault is None:
         if not failed:
             return None
-        return Fault(
+        return new_fault(
             fault_code=report.fault_code,
             severity=report.severity,
             description=report.description,
@@ -68,7 +68,7 @@ def apply_report(
     if fault.status is FaultStatus.CLEARED:
         if not failed:
             return fault
-        return Fault(
+        return new_fault(
             fault_code=fault.fault_code,
             severity=max(fault.severity, report.severity),
             description=report.description or fault.description,
@@ -87,7 +87,7 @@ def apply_report(
         )
     if failed:
         counter = clamp(clamp(fault.debounce_counter, params) - 1, params)
-        return Fault(
+        return new_fault(
             fault_code=fault.fault_code,
             severity=max(fault.severity, report.severity),
             description=report.description or fault.description,
@@ -107,7 +107,7 @@ def apply_report(
             shelved=fault.shelved,
         )
     counter = clamp(clamp(fault.debounce_counter, params) + 1, params)
-    return Fault(
+    return new_fault(
         fault_code=fault.fault_code,
         severity=fault.severity,
         description=fault.description,

@@ -288,17 +288,17 @@ class StatsFold:
         source = transition.source_id if transition is not None else report.source_id  # type: ignore[union-attr]
         severity = fault.severity if fault is not None else (
             report.severity if report is not None else 0)
-        fact = StatFact(
+        fact = StatFact(  # by position: a keyword call costs twice as much, once per record
             record.seq, at, code, source, severity,
-            failed=int(failed),
-            passed=int(report is not None and not failed),
-            activation=int(activation),
-            occurrence=int(failed and transition is not None
-                           and (came is None or came is FaultStatus.CLEARED)),
-            confirmation=int(to is FaultStatus.CONFIRMED),
-            heal=int(to is FaultStatus.HEALED),
-            clear=int(to is FaultStatus.CLEARED),
-            chatter=int(chatter),
+            int(failed),  # failed
+            int(report is not None and not failed),  # passed
+            int(activation),  # activation
+            int(failed and transition is not None  # occurrence
+                and (came is None or came is FaultStatus.CLEARED)),
+            int(to is FaultStatus.CONFIRMED),  # confirmation
+            int(to is FaultStatus.HEALED),  # heal
+            int(to is FaultStatus.CLEARED),  # clear
+            int(chatter),  # chatter
         )
         self._out.facts.append(fact)
         episode = track.episode

@@ -205,13 +205,9 @@ class _Batch:
         return self._append(event, occurred_ns, event_id)
 
     def _append(self, event: DomainEvent, occurred_ns: int, event_id: str | None = None) -> int:
-        record = LogRecord(
-            seq=self.projector.seq + 1,
-            event_id=event_id or new_event_id(),
-            event=event,
-            occurred_at_ns=occurred_ns,
-            recorded_at_ns=self.recorded_ns,
-        )
+        record = LogRecord(  # by position: a NamedTuple's call by keyword costs twice as much
+            self.projector.seq + 1, event_id or new_event_id(), event, occurred_ns,
+            self.recorded_ns)
         self._apply(record)
         return record.seq
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from fnmatch import fnmatchcase
@@ -22,6 +21,7 @@ from faultledger.domain.events import (
 from faultledger.domain.fleet import PushedRecord
 from faultledger.domain.integrity import (
     GENESIS_HASH,
+    parse_json,
     payload_json,
     record_hash,
     walk_chain,
@@ -82,13 +82,10 @@ def hashes_between(conn: Connection, first_seq: int, last_seq: int) -> dict[int,
     return {int(seq): str(digest) for seq, digest in rows}
 
 
-_raw_decode = json.JSONDecoder().raw_decode  # payloads are canonical: no whitespace to skip
-
-
 def _to_record(row: Sequence[Any]) -> LogRecord:
     """A stored row (columns in table order) as a LogRecord; positional for replay speed."""
     seq, event_id, kind, _code, _source, payload, occurred, recorded, version, digest = row
-    return LogRecord(seq, event_id, decode(kind, version, _raw_decode(payload)[0]), occurred,
+    return LogRecord(seq, event_id, decode(kind, version, parse_json(payload)), occurred,
                      recorded, version, digest)
 
 
