@@ -6,7 +6,7 @@ from datetime import datetime
 from typing import NamedTuple
 
 from faultledger.domain.clock import from_ns
-from faultledger.domain.types import FaultStatus
+from faultledger.domain.types import FaultStatus, tuple_new
 
 
 class Acknowledgement(NamedTuple):
@@ -90,9 +90,6 @@ class Fault(NamedTuple):
         return self.shelved is not None and now_ns < self.shelved.until_ns
 
 
-_tuple_new = tuple.__new__
-
-
 def new_fault(
     fault_code: str,
     severity: int,
@@ -116,7 +113,7 @@ def new_fault(
     without the interpreted ``__new__`` a NamedTuple runs for a call by keyword (0.78 µs;
     this, compiled, takes its keywords for free: 0.11 µs; docs/performance.md, "Eighth
     round"). Its parameters are Fault's fields, defaults included (tests/test_fault.py)."""
-    fault: Fault = _tuple_new(Fault, (
+    fault: Fault = tuple_new(Fault, (
         fault_code, severity, description, first_occurred_ns, last_occurred_ns, last_passed_ns,
         occurrence_count, status, reporting_sources, debounce_counter, last_report_failed,
         first_ever_ns, episode_failures, total_failures, confirmed_ns, acknowledged, shelved))

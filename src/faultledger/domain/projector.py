@@ -26,7 +26,7 @@ from faultledger.domain.notifications import for_status_change
 from faultledger.domain.policy import Policy
 from faultledger.domain.statistics import StatsFold
 from faultledger.domain.transition import Transition
-from faultledger.domain.types import EVENT_TYPE_NAMES, FaultStatus, NotificationType
+from faultledger.domain.types import EVENT_TYPE_NAMES, FaultStatus, NotificationType, tuple_new
 
 __all__ = ["Effect", "Projector", "Transition"]
 
@@ -237,12 +237,13 @@ class Projector:
             new = new._replace(confirmed_ns=record.occurred_at_ns)
         self._put(new)
         old_status = None if old is None else old.status
-        return Effect(
+        effect: Effect = tuple_new(Effect, (  # once per report: see tuple_new
             new,
             self._transition(record, new, old_status, EVENT_TYPE_NAMES[event.event_type],
                              event.source_id),
             for_status_change(old_status, new.status),
-        )
+        ))
+        return effect
 
     def _cleared(self, record: LogRecord, event: FaultCleared) -> Effect:
         old = self.get(event.fault_code)

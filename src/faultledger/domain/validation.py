@@ -53,8 +53,16 @@ def fault_code_error(fault_code: str) -> str | None:
     return None
 
 
+_EXACT_EVENT_TYPES = {member.name: member for member in EventType}
+"""The spellings nearly every report uses: one dict lookup (every report is parsed twice)."""
+
+
 def parse_event_type(event_type: object) -> EventType | None:
     """Accept EventType, 0/1 or the names FAILED/PASSED (any case); None when it is neither."""
+    if type(event_type) is str:
+        exact = _EXACT_EVENT_TYPES.get(event_type)
+        if exact is not None:
+            return exact
     if isinstance(event_type, bool):
         return None
     if isinstance(event_type, int):

@@ -352,7 +352,8 @@ class Writer:
                     self._queue[0].caller.wake.release()
                 else:
                     self._leading = False
-                    self._idle.notify_all()
+                    if self._closed:  # only ``close`` waits for the last leader
+                        self._idle.notify_all()
 
     def _gather(self) -> None:
         """Wait up to GATHER_WAIT_S until every caller inside ``submit`` has queued.

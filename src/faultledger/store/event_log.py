@@ -26,6 +26,7 @@ from faultledger.domain.integrity import (
     record_hash,
     walk_chain,
 )
+from faultledger.domain.types import tuple_new
 from faultledger.store import fastpath
 from faultledger.store.schema import events
 
@@ -85,8 +86,10 @@ def hashes_between(conn: Connection, first_seq: int, last_seq: int) -> dict[int,
 def _to_record(row: Sequence[Any]) -> LogRecord:
     """A stored row (columns in table order) as a LogRecord; positional for replay speed."""
     seq, event_id, kind, _code, _source, payload, occurred, recorded, version, digest = row
-    return LogRecord(seq, event_id, decode(kind, version, parse_json(payload)), occurred,
-                     recorded, version, digest)
+    record: LogRecord = tuple_new(LogRecord, (  # see tuple_new
+        seq, event_id, decode(kind, version, parse_json(payload)), occurred, recorded, version,
+        digest))
+    return record
 
 
 _AFTER = bindparam("after", type_=Integer)
