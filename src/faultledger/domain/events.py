@@ -11,7 +11,7 @@ from datetime import datetime
 from typing import Any, NamedTuple
 
 from faultledger.domain.clock import from_ns
-from faultledger.domain.types import EVENT_TYPE_NAMES, EventType, tuple_new
+from faultledger.domain.types import EVENT_TYPE_NAMES, EVENT_TYPES_BY_NAME, EventType, tuple_new
 
 SCHEMA_VERSION = 1
 """Version written for every new record; older versions are upcast by ``decode``."""
@@ -257,12 +257,9 @@ class UnknownRecordError(ValueError):
     """A record this version cannot read: an unknown kind or a newer schema version."""
 
 
-_EVENT_TYPES = {member.name: member for member in EventType}
-
-
 def _reported(p: Mapping[str, Any]) -> DomainEvent:
     event: FaultReported = tuple_new(FaultReported, (  # nine records in ten: see tuple_new
-        p["fault_code"], _EVENT_TYPES[p["event_type"]], p["severity"], p["description"],
+        p["fault_code"], EVENT_TYPES_BY_NAME[p["event_type"]], p["severity"], p["description"],
         p["source_id"]))
     return event
 

@@ -33,6 +33,7 @@ class EventType(IntEnum):
 
 
 EVENT_TYPE_NAMES = {member: member.name for member in EventType}
+EVENT_TYPES_BY_NAME = {member.name: member for member in EventType}
 """EventType -> "FAILED"/"PASSED" (``Enum.name`` is a slow property on Python 3.11)."""
 
 
