@@ -15,6 +15,9 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
+
+import msgspec
 
 from _common import (
     ROOT,
@@ -84,13 +87,14 @@ def ensure_log(db: Path, reports: int, n_codes: int, threads: int) -> int:
     return build_log(db, reports, n_codes, threads)
 
 
-def baseline_read(db: Path) -> tuple[int, float]:
-    """The floor of any replay: read every row with sqlite3 and json.loads its payload."""
+def baseline_read(db: Path, loads: Callable[[str], Any] = json.loads) -> tuple[int, float]:
+    """The floor of any replay: read every row with sqlite3 and json.loads its payload
+    (``loads``: another decoder, for the information line)."""
     start = time.perf_counter()
     conn = sqlite3.connect(db)
     count = 0
     for row in conn.execute("SELECT * FROM events ORDER BY seq"):
-        json.loads(row[5])
+        loads(row[5])
         count += 1
     conn.close()
     return count, time.perf_counter() - start
@@ -198,6 +202,10 @@ def measure(db: Path, rounds: int) -> None:
           f"({base_n:,} rows in {base_s:.2f} s{kept})")
     print(f"   FaultLedger.rebuild()                       {rate:>12,.0f} events/s "
           f"({replayed:,} records in {seconds:.2f} s{kept})")
+    fast_n, fast_s = baseline_read(db, msgspec.json.Decoder().decode)
+    print(f"   information: the same read with msgspec's decoder (the store's, parse_json) "
+          f"{fast_n / fast_s:,.0f} events/s; the rebuild is {rate / (fast_n / fast_s):.2f}x "
+          "that")
     facts, facts_s = facts_write(db, db.with_name(db.name + ".facts"))
     print(f"   raw sqlite3 insert of its {facts:,} statistics facts "
           f"{facts / facts_s:>8,.0f} rows/s ({facts_s:.2f} s; one fact per report, "
