@@ -5,9 +5,10 @@
 faultledger adds: validation, the durable append, the projections, and the rest of its node.
 
 ``shaped DB``: the fault manager's own node (FaultManagerNode on a scratch ledger at DB: all
-its services, the read pool, the events publisher) with only ``report_fault``'s callback
-replaced by the echo. The ratio against it isolates what a report itself costs; the rest of
-the gap to ``echo`` is what rclpy spends per call on a node of that shape.
+its services, the read pool, the events publisher, the report loop) with only
+``report_fault``'s callback replaced by the echo. The ratio against it isolates what a report
+itself costs; its difference from ``echo`` is what the node's serving saves or costs per call
+against rclpy's executor (the report loop answers without the executor: faster).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ def main() -> None:
     if shaped:
         ledger = FaultLedger.open(f"sqlite:///{sys.argv[2]}")
         manager = FaultManagerNode(node, ledger)
-        manager.report_service.callback = echo  # read by the executor on every request
+        manager.report_service.callback = echo  # read by the report loop per request
     else:
         node.create_service(ReportFault, "~/report_fault", echo, qos_profile=SERVICE_QOS,
                             callback_group=ReentrantCallbackGroup())

@@ -100,6 +100,9 @@ class TestOneSharedManager:
             f"topics: {node.get_topic_names_and_types()}")
         assert served.spin_until(
             lambda: ("fault_manager", "/") in node.get_node_names_and_namespaces(), 10.0)
+        # Every service under the node, also those its report loop serves (report_loop.py).
+        assert served.spin_until(lambda: set(expected_services) <= set(dict(
+            node.get_service_names_and_types_by_node("fault_manager", "/"))), 10.0)
         publishers = node.get_publishers_info_by_topic(f"{NS}/events")
         assert [p.node_name for p in publishers] == ["fault_manager"]
         qos = publishers[0].qos_profile

@@ -55,6 +55,7 @@ from faultledger.ros.guard import (
     guard_service,
     log_failure,
 )
+from faultledger.ros.report_loop import ReportLoop, detached_service
 from faultledger.ros.service_queue import take_queued
 from faultledger.service.ledger import FaultLedger
 from faultledger.service.requests import GoalOutcomeRequest, ReportRequest
@@ -184,15 +185,21 @@ class FaultManagerNode:
             return guard_service(self._refuse_write(name) if read_only else callback,
                                  self.log, name)
 
-        self.report_service = node.create_service(
-            ReportFault, "~/report_fault", write(self.report_fault, "report_fault"),
-            qos_profile=SERVICE_QOS)
-        self.report_once_service = node.create_service(
-            ReportFaultOnce, "~/report_fault_once",
-            write(self.report_fault_once, "report_fault_once"), qos_profile=SERVICE_QOS)
-        self.goal_service = node.create_service(
-            ReportGoalOutcome, "~/report_goal_outcome",
-            write(self.report_goal_outcome, "report_goal_outcome"), qos_profile=SERVICE_QOS)
+        def report(kind: Any, name: str, callback: ServiceCallback) -> Service:
+            """A report service: served by the report loop (report_loop.py); a follower's,
+            which only refuses, by the executor."""
+            if read_only:
+                return node.create_service(kind, f"~/{name}", write(callback, name),
+                                           qos_profile=SERVICE_QOS)
+            return detached_service(node, kind, f"~/{name}", write(callback, name),
+                                    SERVICE_QOS)
+
+        self.report_service = report(ReportFault, "report_fault", self.report_fault)
+        self.report_once_service = report(ReportFaultOnce, "report_fault_once",
+                                          self.report_fault_once)
+        self.goal_service = report(ReportGoalOutcome, "report_goal_outcome",
+                                   self.report_goal_outcome)
+        reports = [self.report_service, self.report_once_service, self.goal_service]
         self.clear_service = node.create_service(
             ClearFault, "~/clear_fault", write(self.clear_fault, "clear_fault"),
             qos_profile=SERVICE_QOS)
@@ -210,17 +217,21 @@ class FaultManagerNode:
             (GetHistory, "get_history", self.get_history),
             (GetStatistics, "get_statistics", self.get_statistics),
         ]
-        self.services = [self.report_service, self.report_once_service, self.goal_service,
+        self.services = [*(reports if read_only else []),
                          self.clear_service, self.acknowledge_service, *(
             node.create_service(kind, f"~/{name}",
                                 self.reads.offload(guard_service(callback, self.log, name)),
                                 qos_profile=SERVICE_QOS, callback_group=self.read_group)
             for kind, name, callback in reads)]
         self._unpublished: deque[Notification] = deque()
+        self._publishing = threading.Lock()
+        self.report_loop: ReportLoop | None = None
         self._publish_guarded = guard_callback(self._publish_queued, self.log,
                                                "events publisher")
         self._publish_now = node.create_guard_condition(self._publish_guarded)
         self.subscription = ledger.subscribe(self.publish)
+        if not read_only:
+            self.report_loop = ReportLoop(node, reports, self.log, self._publish_guarded)
 
     def _refuse_write(self, name: str) -> ServiceCallback:
         """A follower's answer to a write: refused, with where to send it instead."""
@@ -238,17 +249,23 @@ class FaultManagerNode:
         that committed it). Only medkit's event types: a drop-in peer's subscribers know no
         others (acknowledgements and shelvings are on the HTTP stream).
 
-        The message is queued and published by the executor once it is free: after the
-        answer to the report that caused it, so a reporter waits for its commit and not
-        also for the event (a tenth of a report's round trip; docs/performance.md). The
-        queue keeps log order; ``close`` publishes what is left."""
+        The message is queued and published after the answer to the report that caused
+        it, so a reporter waits for its commit and not also for the event (a tenth of a
+        report's round trip; docs/performance.md): by the report loop once it has sent its
+        answers, or, for a change committed on another thread (a clear, a timer), by the
+        executor (a guard condition). The queue keeps log order; ``close`` publishes what
+        is left."""
         if notification.event_type in MEDKIT_NOTIFICATIONS:
             self._unpublished.append(notification)
-            self._publish_now.trigger()
+            loop = self.report_loop
+            if loop is None or loop.thread_id != threading.get_ident():
+                self._publish_now.trigger()
+            # else the report loop publishes once it has sent its answers (``after``)
 
     def _publish_queued(self) -> None:
-        while self._unpublished:
-            self.events.publish(convert.event_msg(self._unpublished.popleft()))
+        with self._publishing:  # two threads publish (executor, report loop): one at a time
+            while self._unpublished:
+                self.events.publish(convert.event_msg(self._unpublished.popleft()))
 
     def report_fault(self, request: Any, response: Any) -> Any:
         return self._report_burst(self.report_service, request, response, idempotent=False)
@@ -406,6 +423,8 @@ class FaultManagerNode:
 
     def close(self) -> None:
         """Once the executor stopped (``serve`` first lets reads in flight finish)."""
+        if self.report_loop is not None:
+            self.report_loop.close()
         self.subscription.cancel()
         self._publish_guarded()
         self.reads.close()
