@@ -100,10 +100,12 @@ class ReportLoop:
             wait_set.wait(WAIT_TIMEOUT_NS)
             ready = wait_set.get_ready_entities("service")
         if not self._stop.is_set():
-            for service in self._services:
-                if service.handle.pointer in ready:
-                    self._answer_one(service)
-            self._after()
+            try:
+                for service in self._services:
+                    if service.handle.pointer in ready:
+                        self._answer_one(service)
+            finally:  # what was committed is published even if an answer failed
+                self._after()
         self._failing = False
 
     @staticmethod
