@@ -7,9 +7,10 @@ ledger is compiled, and with several clients it is the executor's CPU that runs 
 created without registering them with the node (the executor never sees them; the ROS graph
 still lists them under the node, since rcl creates them on it) and one thread waits on them
 alone: take a request, call the service's callback, send its answer, exactly as the executor
-would, but without the rebuild and the task. The callbacks are the node's own
-(``guard_service``: they never raise), so they run unchanged; reads, clears, the events
-publisher and the bridges stay with the executor.
+would, but without the rebuild and the task; after each turn it publishes the events of
+what it answered. The callbacks are the node's own (``guard_service``: they never raise),
+so they run unchanged; reads, clears, the events of other changes and the bridges stay with
+the executor.
 
 This uses two entry points of rclpy's implementation module (``Service`` and ``WaitSet``,
 which rclpy's own executor uses): the ROS 2 wheels are pinned (requirements-ros.txt), and
