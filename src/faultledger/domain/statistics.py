@@ -311,8 +311,7 @@ class StatsFold:
             episode = Episode(record.seq, code, source, severity, at)
             self._started_at[record.seq] = len(self._out.started)
             self._out.started.append(episode)
-        track = tuple_new(CodeTrack, (last_failed, activations, episode))
-        self._put(code, track)
+        self._put(code, tuple_new(CodeTrack, (last_failed, activations, episode)))
 
     def _replace_started(self, ended: Episode) -> None:
         """An episode that starts and ends in one output is written once, ended."""

@@ -33,8 +33,9 @@ class EventType(IntEnum):
 
 
 EVENT_TYPE_NAMES = {member: member.name for member in EventType}
-EVENT_TYPES_BY_NAME = {member.name: member for member in EventType}
 """EventType -> "FAILED"/"PASSED" (``Enum.name`` is a slow property on Python 3.11)."""
+EVENT_TYPES_BY_NAME = {member.name: member for member in EventType}
+""""FAILED"/"PASSED" -> EventType: the record decoder's and ``parse_event_type``'s map."""
 
 
 class NotificationType(StrEnum):
