@@ -48,6 +48,8 @@ class Run:
     p50_ms: float
     p99_ms: float
     rejected: int
+    lost: int = 0
+    """Calls whose answer never came (the client gave up after ANSWER_TIMEOUT_S)."""
 
 
 def start_server(kind: str, db: Path, log: Path) -> subprocess.Popen[str]:
@@ -94,7 +96,8 @@ def run_clients(clients: int, calls: int, codes: int) -> Run:
     latencies = [x for r in results for x in r["latencies"]]
     elapsed = max(r["elapsed"] for r in results)
     return Run(len(latencies) / elapsed, percentile(latencies, 0.5) * 1e3,
-               percentile(latencies, 0.99) * 1e3, sum(r["rejected"] for r in results))
+               percentile(latencies, 0.99) * 1e3, sum(r["rejected"] for r in results),
+               sum(r["lost"] for r in results))
 
 
 def measure(kind: str, clients: int, calls: int, codes: int, scratch: Path) -> Run:
@@ -110,7 +113,8 @@ def measure(kind: str, clients: int, calls: int, codes: int, scratch: Path) -> R
 
 def median_run(runs: list[Run]) -> Run:
     return Run(statistics.median(r.rate for r in runs), statistics.median(r.p50_ms for r in runs),
-               statistics.median(r.p99_ms for r in runs), sum(r.rejected for r in runs))
+               statistics.median(r.p99_ms for r in runs), sum(r.rejected for r in runs),
+               sum(r.lost for r in runs))
 
 
 def main() -> None:
@@ -147,7 +151,8 @@ def main() -> None:
             print(f"-- {clients} client process(es)")
             for name, run in (("echo", echo), ("shaped echo", shaped), ("faultledger", ours)):
                 print(f"   {name:<12} {run.rate:8,.0f} calls/s   p50 {run.p50_ms:6.2f} ms   "
-                      f"p99 {run.p99_ms:6.2f} ms   rejected {run.rejected}")
+                      f"p99 {run.p99_ms:6.2f} ms   rejected {run.rejected}"
+                      + (f"   LOST {run.lost} answers" if run.lost else ""))
             print(f"   ratio {share:.2f}x echo (target >= {TARGET_RATIO}x: "
                   f"{verdict(share >= TARGET_RATIO)}); {ours.rate:,.0f}/s "
                   f"(target >= {target:,.0f}/s: {verdict(ours.rate >= target)})")

@@ -4,6 +4,7 @@ network scope line and the FaultReporter's local refusal of NUL (issue "Hardenin
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
@@ -11,16 +12,19 @@ from builtin_interfaces.msg import Time
 from faultledger_msgs.srv import GetStatistics
 from rclpy.serialization import deserialize_message, serialize_message
 from ros2_medkit_msgs.msg import Fault as FaultMsg
+from ros2_medkit_msgs.msg import FaultEvent
 from ros2_medkit_msgs.srv import ListFaults, ReportFault
 
 from faultledger.domain.clock import MAX_NS, NS_PER_SECOND
 from faultledger.domain.fault import Fault
+from faultledger.domain.notifications import Notification
 from faultledger.domain.types import FaultStatus
 from faultledger.errors import InvalidInputError
 from faultledger.ros import convert
 from faultledger.ros.guard import clip, error_text, guard_callback, guard_service
 from faultledger.ros.network import scope
 from faultledger.ros.reporter import FaultReporter
+from faultledger.service.ledger import FaultLedger
 
 if TYPE_CHECKING:
     from tests.ros.conftest import RosClient
@@ -147,6 +151,30 @@ def test_fault_after_2038_converts_and_serialises() -> None:
     message = deserialize_message(serialize_message(convert.fault_msg(fault)), FaultMsg)
     assert message.last_occurred.sec == MAX_SEC
     assert message.occurrence_count == 2**32 - 1
+
+
+def test_an_event_written_over_the_last_one_is_the_event_built_anew(tmp_path: Path) -> None:
+    """The events publisher writes every event into one message (``event_msg(..., into)``):
+    nothing of the event before may stay in it, whatever either of them held."""
+    notifications: list[Notification] = []
+    ledger = FaultLedger.open(f"sqlite:///{tmp_path / 'faults.db'}")
+    try:
+        ledger.subscribe(notifications.append)
+        for source in ("/a", "/b", "/c"):  # three sources on the first fault
+            ledger.report("MANY_SOURCES", "FAILED", severity=3, source_id=source,
+                          description="a long description")
+        ledger.report("BRAKE_OVERHEAT", "FAILED", severity=1, source_id="/d")
+        ledger.clear("MANY_SOURCES")
+    finally:
+        ledger.close()
+    assert len({n.fault.fault_code for n in notifications}) == 2
+    reused = FaultEvent()
+    for notification in notifications + notifications[::-1]:
+        fresh = convert.event_msg(notification)
+        assert convert.event_msg(notification, reused) is reused
+        assert reused == fresh
+        assert deserialize_message(serialize_message(reused), FaultEvent) == fresh
+        assert list(fresh.fault.reporting_sources) == list(notification.fault.reporting_sources)
 
 
 @pytest.mark.parametrize(("stamp", "words"), [

@@ -225,6 +225,9 @@ class FaultManagerNode:
             for kind, name, callback in reads)]
         self._unpublished: deque[Notification] = deque()
         self._publishing = threading.Lock()
+        self._event = FaultEvent()
+        """The message every event is written into before it is published (under
+        ``_publishing``; ``convert.event_msg``)."""
         self.report_loop: ReportLoop | None = None
         self._publish_guarded = guard_callback(self._publish_queued, self.log,
                                                "events publisher")
@@ -265,7 +268,8 @@ class FaultManagerNode:
     def _publish_queued(self) -> None:
         with self._publishing:  # two threads publish (executor, report loop): one at a time
             while self._unpublished:
-                self.events.publish(convert.event_msg(self._unpublished.popleft()))
+                self.events.publish(convert.event_msg(self._unpublished.popleft(),
+                                                      self._event))
 
     def report_fault(self, request: Any, response: Any) -> Any:
         return self._report_burst(self.report_service, request, response, idempotent=False)

@@ -38,6 +38,7 @@ from faultledger.service.bootstrap import Role, open_ledger, resolve
 from faultledger.service.config import Settings
 from faultledger.service.ledger import FaultLedger
 from faultledger.service.policy_check import startup_warnings
+from faultledger.startup_heap import freeze_startup_heap
 from faultledger.store.database import describe
 
 
@@ -296,6 +297,7 @@ def serve(settings: Settings, db_url: str | None, ros_args: list[str],
                              read_only=follower,
                              fleet_labels=settings.fleet.labels() if settings.fleet else None)
             web.start()
+        freeze_startup_heap()  # before "ready": the collector skips all of the above
         restored = ledger.restored
         mode = f" follower of {leader} (read-only)" if follower else ""
         print(f"fault_manager ready: db={describe(url)} faults={restored.faults} "
