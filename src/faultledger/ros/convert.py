@@ -98,9 +98,9 @@ def event_msg(notification: Notification, into: Any = None) -> Any:
     """A FaultEvent of ``notification``; ``into``: a FaultEvent to overwrite instead.
 
     The events publisher passes the one it published last: ``publish`` converts a message
-    to C before it returns, so the next event may reuse it, at 3 µs instead of 13 µs for
-    the seven messages a new event builds (rosidl's constructors also make a default of
-    every nested field they are given; docs/performance.md, "Tenth round")."""
+    to C before it returns, so the next event may reuse it: 3 µs instead of 10 µs for the
+    six messages a new event builds (and the defaults rosidl's constructors make of every
+    nested field they are given anyway; docs/performance.md, "Tenth round")."""
     if into is None:
         return FaultEvent(event_type=notification.event_type.value,
                           fault=fault_msg(notification.fault),
