@@ -126,7 +126,8 @@ class HttpServer:
 
     def start(self) -> None:
         """Serve in a background thread; returns once it accepts connections."""
-        # A heavy read's full collection then stops every thread for ~25 ms instead of ~120.
+        # With the start-up heap frozen, a heavy read's full collection stops every thread
+        # for ~25 ms instead of ~120.
         freeze_startup_heap()
         # Threads take turns holding the GIL every switch interval: 1 ms instead of Python's
         # 5 lets the event loop (and a ROS executor) in sooner while a heavy read computes.
