@@ -7,6 +7,7 @@ import hashlib
 import json
 import os
 import resource
+import shutil
 import sqlite3
 import statistics
 import subprocess
@@ -339,6 +340,35 @@ def median_run(runs: list[Run]) -> Run:
     return sorted(runs, key=lambda r: r.rate)[len(runs) // 2]
 
 
+def grown_log(log: Path, work: Plan, threads: int, rounds: int) -> None:
+    """``threads`` reporters on a copy of a grown log (``bench/rebuild.py --keep``), each
+    round beside raw sqlite3's (a) on a fresh file: what the per-record cost is once the
+    log's B-trees are larger than the page cache, as on a robot after months."""
+    with sqlite3.connect(log) as conn:
+        (records,) = conn.execute("SELECT count(*) FROM events").fetchone()
+    header(f"ingest on a grown log: {threads} threads, {len(work):,} reports per round on a "
+           f"copy of {log} ({records:,} records), median of {rounds} round(s)")
+    grown: list[Run] = []
+    raws: list[Run] = []
+    for r in range(rounds):
+        with scratch_dir("ingest-grown-") as workdir:
+            raws.append(run_raw(work, workdir / "raw.db"))
+            copy = workdir / "grown.db"
+            shutil.copyfile(log, copy)
+            grown.append(run_ledger(work, threads, copy))
+        print(f"   round {r + 1}: raw {raws[-1].rate:,.0f}/s, grown log {grown[-1].rate:,.0f}/s, "
+              f"{cpu_us(grown[-1]):.1f} µs CPU per report", flush=True)
+    raw, many = median_run(raws), median_run(grown)
+    show(raw)
+    show(many)
+    print(f"   {f'{threads} threads on the grown log vs (a)':<42} "
+          f"{ratio(many.rate, raw.rate):>9.2f}x   (information: the targets are above)")
+    print(f"   {f'{threads} threads on the grown log (reports/s)':<42} {many.rate:>10,.0f}   "
+          f"target {'>= 10,000':<10} {verdict(many.rate >= 10_000)}")
+    print(f"   {f'{threads} threads CPU per report (µs)':<42} {cpu_us(many):>10,.0f}   target "
+          f"{'<= 100':<10} {verdict(cpu_us(many) <= 100)}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true",
@@ -349,10 +379,16 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=8)
     parser.add_argument("--rounds", type=int, default=None,
                         help="rounds of every configuration, median kept (default 3, --quick 1)")
+    parser.add_argument("--grown", type=Path, default=None, metavar="LOG",
+                        help="only the 8-thread ingest on a copy of this grown log "
+                             "(bench/rebuild.py --keep var/bench/rebuild.db makes one)")
     args = parser.parse_args()
     n = args.reports or (500 if args.quick else 3000)
     rounds = args.rounds or (1 if args.quick else 3)
     work = plan(n, args.codes)
+    if args.grown is not None:
+        grown_log(args.grown, work, args.threads, rounds)
+        return
     header(f"ingest: {n:,} reports over {args.codes} codes per configuration, median of "
            f"{rounds} round(s) (WAL, synchronous=FULL: every acknowledged report is fsynced)")
 

@@ -48,7 +48,7 @@ from faultledger.domain.events import (
 from faultledger.domain.fault import Fault
 from faultledger.domain.integrity import GENESIS_HASH
 from faultledger.domain.periods import default_calendar
-from faultledger.domain.projector import Projector
+from faultledger.domain.projector import Projector, Transition
 from faultledger.domain.statistics import StatsFold
 from faultledger.domain.types import EventType
 from faultledger.domain.validation import ROBOT_ID_RULE
@@ -101,6 +101,19 @@ def save_old_faults(conn: Any, faults: list[Fault]) -> None:
                           f"({', '.join(':' + c for c in OLD_FAULT_COLUMNS)})"), rows)
 
 
+def save_old_projections(conn: Any, found: list[Transition], seq: int, head_hash: str) -> None:
+    """Transitions and the checkpoint as a schema before 0009 holds them (no index by code:
+    the upgrade fills it)."""
+    conn.execute(text("INSERT INTO transitions VALUES (:seq, :fault_code, :from_status, "
+                      ":to_status, :at_ns, :cause, :source_id)"),
+                 [{"seq": t.seq, "fault_code": t.fault_code,
+                   "from_status": None if t.from_status is None else t.from_status.value,
+                   "to_status": t.to_status.value, "at_ns": t.at_ns, "cause": t.cause,
+                   "source_id": t.source_id} for t in found])
+    conn.execute(text("INSERT INTO checkpoints VALUES ('projection', :seq, :hash, 1)"),
+                 {"seq": seq, "hash": head_hash})
+
+
 def pre_identity_log(path: Path, reports: int = 3) -> None:
     """A log as faultledger wrote it before identities (schema 0003): a policy and reports,
     appended with their projections in one transaction, no identity record."""
@@ -116,8 +129,7 @@ def pre_identity_log(path: Path, reports: int = 3) -> None:
     try:
         with engine.begin() as conn:
             head_hash = event_log.append(conn, records, GENESIS_HASH)
-            projections.save(conn, [], transitions,
-                             projections.Checkpoint(len(records), head_hash, 1))
+            save_old_projections(conn, transitions, len(records), head_hash)
             save_old_faults(conn, projector.committed())
             # No statistics rows: 0006 (stat_hours) moves their checkpoint back to 0 on
             # upgrade and the next writing open recomputes them from the whole log.

@@ -197,6 +197,11 @@ def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
     # Statistics join a VALUES list of periods to time ranges; with many periods SQLite's
     # planner would build a throw-away automatic index instead of using ours (50× slower).
     cursor.execute("PRAGMA automatic_index = OFF")
+    # Temporary storage in memory: a group commit's multi-row INSERT needs a statement
+    # journal, which SQLite spills to a new file in /var/tmp past 64 KiB (created, written,
+    # unlinked: once per ~25 reports of 8 callers, more as the log grows), and a robot's
+    # root file system may be read-only (docs/performance.md, "Eleventh round").
+    cursor.execute("PRAGMA temp_store = MEMORY")
     cursor.close()
 
 

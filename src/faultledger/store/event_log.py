@@ -7,7 +7,7 @@ from dataclasses import dataclass, replace
 from fnmatch import fnmatchcase
 from typing import Any, NamedTuple
 
-from sqlalchemy import ColumnElement, Connection, Integer, Select, Table, bindparam, func, select
+from sqlalchemy import Connection, Integer, Select, bindparam, func, select
 
 from faultledger.domain.events import (
     POLICY_CHANGED,
@@ -27,7 +27,7 @@ from faultledger.domain.integrity import (
     walk_chain,
 )
 from faultledger.domain.types import tuple_new
-from faultledger.store import fastpath
+from faultledger.store import code_index, fastpath
 from faultledger.store.schema import events
 
 READ_CHUNK = 5_000
@@ -215,23 +215,26 @@ def count_matching(conn: Connection, where: RecordFilter) -> int:
 
 
 def filtered(conn: Connection, query: Select[Any], where: RecordFilter, *,
-              ordered: bool = True, table: Table = events,
-              scope: ColumnElement[bool] | None = None) -> Select[Any] | None:
+              ordered: bool = True) -> Select[Any] | None:
     """``query`` restricted by ``where`` in seq order (newest first when ``descending``);
-    None when no stored code can match. ``table`` is ``events`` or a table of the same
-    columns (a fleet central's copy of robot logs, with ``scope`` picking one chain)."""
-    c = table.c
-    if scope is not None:
-        query = query.where(scope)
+    None when no stored code can match."""
+    c = events.c
     if ordered:
         query = query.order_by(c.seq.desc() if where.descending else c.seq)
+    codes: list[str] = []
     if where.fault_code is not None:
-        query = query.where(c.fault_code == where.fault_code)
+        codes.append(where.fault_code)
     if where.codes:
-        codes = matching_codes(conn, where.codes, table, scope)
-        if not codes:
+        found = matching_codes(conn, where.codes)
+        if not found:
             return None
-        query = query.where(c.fault_code.in_(codes))
+        if where.fault_code is not None:
+            if where.fault_code not in found:
+                return None
+        else:
+            codes = found
+    if codes:
+        query = query.where(code_index.of_codes(codes))
     if where.source_id is not None:
         query = query.where(c.source_id == where.source_id)
     if where.since_ns is not None:
@@ -249,18 +252,17 @@ def filtered(conn: Connection, query: Select[Any], where: RecordFilter, *,
     return query
 
 
-def matching_codes(conn: Connection, patterns: Sequence[str], table: Table = events,
-                   scope: ColumnElement[bool] | None = None) -> list[str]:
+def matching_codes(conn: Connection, patterns: Sequence[str]) -> list[str]:
     """Exact codes as given plus the stored codes a glob matches (fnmatch, case-sensitive).
 
-    Globs are matched in Python against the distinct stored codes, so the records themselves
-    are then selected through ``ix_events_fault_code_seq`` with a plain ``IN``.
+    Globs are matched in Python against the distinct stored codes (``code_index``), so the
+    records themselves are then selected by code through the index with a plain ``IN``.
     """
     found = {pattern for pattern in patterns if not is_glob(pattern)}
     globs = [pattern for pattern in patterns if is_glob(pattern)]
     if globs:
         prefix = _common_prefix([_literal_prefix(g) for g in globs])
-        found.update(code for code in distinct_codes(conn, prefix, table, scope)
+        found.update(code for code in code_index.distinct_codes(conn, prefix)
                      if any(fnmatchcase(code, g) for g in globs))
     return sorted(found)
 
@@ -277,33 +279,6 @@ def _common_prefix(texts: Sequence[str]) -> str:
     size = next((i for i, (a, b) in enumerate(zip(first, last, strict=False)) if a != b),
                 min(len(first), len(last)))
     return first[:size]
-
-
-def distinct_codes(conn: Connection, prefix: str = "", table: Table = events,
-                   scope: ColumnElement[bool] | None = None) -> Iterator[str]:
-    """Distinct stored fault codes in order, by a loose index scan of ix_events_fault_code_seq.
-
-    One index seek per distinct code instead of a pass over every record. On SQLite (binary
-    collation) the scan starts at ``prefix`` and stops after the codes that start with it;
-    elsewhere a collation may order codes differently, so every code is visited.
-    """
-    bounded = bool(prefix) and conn.dialect.name == "sqlite"
-    column = table.c.fault_code
-    last: str | None = None
-    while True:
-        if last is not None:
-            condition = column > last
-        elif bounded:
-            condition = column >= prefix
-        else:
-            condition = column.is_not(None)
-        if scope is not None:
-            condition = condition & scope
-        code = conn.execute(select(func.min(column)).where(condition)).scalar()
-        if code is None or (bounded and not str(code).startswith(prefix)):
-            return
-        last = str(code)
-        yield last
 
 
 def hash_at(conn: Connection, seq: int) -> str | None:

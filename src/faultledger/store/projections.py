@@ -16,11 +16,17 @@ from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json
 from faultledger.domain.projector import Transition
 from faultledger.domain.types import FaultStatus
-from faultledger.store import fastpath
+from faultledger.store import code_index, fastpath
 from faultledger.store.dialects import bulk_load, upsert
-from faultledger.store.schema import checkpoints, faults, ledger_identity, transitions
+from faultledger.store.schema import (
+    PROJECTION_CHECKPOINT,
+    checkpoints,
+    faults,
+    ledger_identity,
+    transitions,
+)
 
-CHECKPOINT = "projection"
+CHECKPOINT = PROJECTION_CHECKPOINT
 _INSERT_TRANSITION = transitions.insert()
 
 
@@ -135,8 +141,10 @@ def save(
     new_transitions: Iterable[Transition],
     checkpoint: Checkpoint,
 ) -> None:
-    """Write what a batch changed and move the checkpoint, in the caller's transaction."""
+    """Write what a batch changed and move the checkpoint, in the caller's transaction,
+    with the log's index by code up to it."""
     dialect = conn.dialect.name
+    code_index.add(conn, load_checkpoint(conn).seq, checkpoint.seq)
     fastpath.execute_many(conn, upsert(faults, dialect), [fault_row(f) for f in changed])
     fastpath.execute_many(conn, _INSERT_TRANSITION, [_transition_row(t) for t in new_transitions])
     fastpath.execute_many(conn, upsert(checkpoints, dialect),
@@ -153,6 +161,8 @@ def replace_all(
     """Drop the projections and write a full replay's result (``rebuild``)."""
     conn.execute(delete(faults))
     conn.execute(delete(transitions))
+    conn.execute(delete(checkpoints).where(checkpoints.c.name == CHECKPOINT))
+    code_index.clear(conn)
     with loading(conn):
         save(conn, all_faults, all_transitions, checkpoint)
 

@@ -33,8 +33,26 @@ events = Table(
     Column("schema_version", Integer, nullable=False),
     Column("hash", String(64), nullable=False),
 )
-Index("ix_events_fault_code_seq", events.c.fault_code, events.c.seq)
 Index("ix_events_occurred_at", events.c.occurred_at_ns)
+
+events_by_code = Table(
+    "events_by_code",
+    metadata,
+    Column("fault_code", String(128), primary_key=True),
+    Column("seq", BigInteger, primary_key=True, autoincrement=False),
+    sqlite_with_rowid=False,
+)
+"""The seqs of each fault code's records, up to the projections' checkpoint (Alembic 0009):
+the log's index by code, written with the projections instead of with every record.
+
+An index on ``events (fault_code, seq)`` put each report into the leaf page of its code, so
+a group commit of eight reports over eight codes wrote eight more pages into the WAL, and as
+the log grew past the page cache each of them was read back too: on a log of a million
+records eight reporters ran at 9,150 reports/s instead of 12,600 without it
+(docs/performance.md, "Eleventh round"). Written once per save (every 1,000 records at
+most), a code's leaf page takes all of its records since the last save at once. Reads by
+code take these seqs and the records after the checkpoint (``event_log.by_codes``); rows
+past the checkpoint (left by a checkpoint that moved back) are never read."""
 
 faults = Table(
     "faults",
@@ -81,6 +99,7 @@ checkpoints = Table(
     Column("hash", String(64), nullable=False),
     Column("policy_seq", BigInteger, nullable=False),
 )
+PROJECTION_CHECKPOINT = "projection"
 """``projection`` row: the seq the projections include, the hash of that record, and the seq
 of the policy_changed record in force (so startup finds the policy without a log scan).
 
