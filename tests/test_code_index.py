@@ -180,3 +180,23 @@ def test_verify_compares_the_index_with_the_log(tmp_path: Path, tamper: str, wor
         result = ledger.verify()
     assert not result.ok
     assert any(words in problem for problem in result.problems), result.problems
+
+
+@pytest.mark.parametrize("tamper", [
+    "DELETE FROM events_by_code WHERE seq = 3",
+    "INSERT INTO events_by_code VALUES ('LIDAR_TIMEOUT', 2)",
+])
+def test_rebuild_makes_a_damaged_index_again(tmp_path: Path, tamper: str) -> None:
+    path = tmp_path / "faults.db"
+    with FaultLedger.open(url(path)) as ledger:
+        for i in range(8):
+            ledger.report(CODES[i % 2], "FAILED", 2, "", "/arm")
+    expected = coded_seqs(path)
+    with sqlite3.connect(path) as conn:
+        conn.execute(tamper)
+    with FaultLedger.open(url(path)) as ledger:
+        assert not ledger.verify().ok
+        ledger.rebuild()
+        assert ledger.verify().ok, ledger.verify().problems
+        for code in CODES[:2]:
+            assert [r.seq for r in ledger.history(code=code)] == expected[code]

@@ -161,8 +161,7 @@ def replace_all(
     """Drop the projections and write a full replay's result (``rebuild``)."""
     conn.execute(delete(faults))
     conn.execute(delete(transitions))
-    conn.execute(delete(checkpoints).where(checkpoints.c.name == CHECKPOINT))
-    code_index.clear(conn)
+    code_index.ensure_complete(conn, load_checkpoint(conn).seq)
     with loading(conn):
         save(conn, all_faults, all_transitions, checkpoint)
 
