@@ -51,7 +51,7 @@ the log grew past the page cache each of them was read back too: on a log of a m
 records eight reporters ran at 9,150 reports/s instead of 12,600 without it
 (docs/performance.md, "Eleventh round"). Written once per save (every 1,000 records at
 most), a code's leaf page takes all of its records since the last save at once. Reads by
-code take these seqs and the records after the checkpoint (``event_log.by_codes``); rows
+code take these seqs and the records after the checkpoint (``code_index.of_codes``); rows
 past the checkpoint (left by a checkpoint that moved back) are never read."""
 
 faults = Table(
