@@ -10,6 +10,7 @@ on a running ledger. Why not an index on the log itself: schema.events_by_code.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from sqlalchemy import ColumnElement, Connection, and_, delete, func, select, union_all
 from sqlalchemy.dialects import postgresql, sqlite
@@ -50,13 +51,9 @@ def add(conn: Connection, after: int, upto: int) -> None:
     rows = (select(events.c.fault_code, events.c.seq)
             .where(events.c.seq > after, events.c.seq <= upto, events.c.fault_code.is_not(None))
             .order_by(events.c.fault_code, events.c.seq))  # appended in key order
-    columns = ["fault_code", "seq"]
-    if conn.dialect.name == "postgresql":
-        conn.execute(postgresql.insert(events_by_code).from_select(columns, rows)
-                     .on_conflict_do_nothing())
-    else:
-        conn.execute(sqlite.insert(events_by_code).from_select(columns, rows)
-                     .on_conflict_do_nothing())
+    module: Any = postgresql if conn.dialect.name == "postgresql" else sqlite
+    conn.execute(module.insert(events_by_code).from_select(["fault_code", "seq"], rows)
+                 .on_conflict_do_nothing())
 
 
 def ensure_complete(conn: Connection, upto: int) -> None:
