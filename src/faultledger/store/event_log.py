@@ -221,18 +221,12 @@ def filtered(conn: Connection, query: Select[Any], where: RecordFilter, *,
     c = events.c
     if ordered:
         query = query.order_by(c.seq.desc() if where.descending else c.seq)
-    codes: list[str] = []
-    if where.fault_code is not None:
-        codes.append(where.fault_code)
+    codes = [] if where.fault_code is None else [where.fault_code]
     if where.codes:
         found = matching_codes(conn, where.codes)
-        if not found:
+        codes = [code for code in codes if code in found] if codes else found
+        if not codes:
             return None
-        if where.fault_code is not None:
-            if where.fault_code not in found:
-                return None
-        else:
-            codes = found
     if codes:
         query = query.where(code_index.of_codes(codes))
     if where.source_id is not None:
