@@ -28,7 +28,7 @@ from faultledger.domain.integrity import GENESIS_HASH, canonical_json, record_ha
 from faultledger.errors import InvalidInputError
 from faultledger.service.audit import export_history
 from faultledger.service.requests import ReportRequest
-from faultledger.store import code_index, event_log
+from faultledger.store import event_log, log_index
 
 T0 = datetime(2026, 11, 21, 22, 0, tzinfo=UTC)
 CLI = [sys.executable, "-m", "faultledger.cli.main"]
@@ -191,8 +191,8 @@ def test_distinct_codes_and_glob_expansion_use_the_stored_codes(ledger: FaultLed
     database = Database(log_url, create=False)
     try:
         with database.reading() as conn:
-            assert code_index.distinct_codes(conn) == stored
-            assert code_index.distinct_codes(conn, "HW_") == [
+            assert log_index.distinct_codes(conn) == stored
+            assert log_index.distinct_codes(conn, "HW_") == [
                 c for c in stored if c.startswith("HW_")]
             assert event_log.matching_codes(conn, ["HW_*_STOP", "ACTION_D*", "UNKNOWN"]) == sorted(
                 [c for c in stored if fnmatchcase(c, "HW_*_STOP") or c.startswith("ACTION_D")]

@@ -77,7 +77,7 @@ def test_damaged_index_with_an_intact_chain_fails_verify(populated: Path,
     with sqlite3.connect(copy) as conn:
         page_size = int(conn.execute("PRAGMA page_size").fetchone()[0])
         (root,) = conn.execute("SELECT rootpage FROM sqlite_master WHERE name = "
-                               "'ix_events_occurred_at'").fetchone()
+                               "'ix_transitions_at'").fetchone()
     conn.close()
     with copy.open("r+b") as raw:  # the last byte of the root page: inside its last cell's key
         raw.seek(int(root) * page_size - 1)

@@ -21,7 +21,7 @@ from faultledger.service.arguments import (
 )
 from faultledger.service.restore import DAMAGED, UnreadableRecord, replay, stats_of
 from faultledger.service.results import VerifyReport
-from faultledger.store import code_index, event_log, integrity_check, projections, stat_tables
+from faultledger.store import event_log, integrity_check, log_index, projections, stat_tables
 from faultledger.store.database import Database
 
 if TYPE_CHECKING:
@@ -201,7 +201,7 @@ def _projection_problems(conn: Connection, checkpoint: projections.Checkpoint) -
             problems.append(f"projection of fault {code} differs from a full replay of the log")
     if projections.load_transitions(conn) != expected_transitions:
         problems.append("transitions table differs from a full replay of the log")
-    problems.extend(code_index.differences(conn, checkpoint.seq))
+    problems.extend(log_index.differences(conn, checkpoint.seq))
     if stat_tables.checkpoint_seq(conn) == checkpoint.seq:
         problems.extend(stat_tables.differences(conn, stats_of(expected).take()))
     else:

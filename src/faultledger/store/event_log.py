@@ -27,7 +27,7 @@ from faultledger.domain.integrity import (
     walk_chain,
 )
 from faultledger.domain.types import tuple_new
-from faultledger.store import code_index, fastpath
+from faultledger.store import fastpath, log_index
 from faultledger.store.schema import events
 
 READ_CHUNK = 5_000
@@ -43,10 +43,8 @@ def head(conn: Connection) -> tuple[int, str]:
 
 
 def existing_event_ids(conn: Connection, event_ids: Sequence[str]) -> set[str]:
-    if not event_ids:
-        return set()
-    found = conn.execute(select(events.c.event_id).where(events.c.event_id.in_(event_ids)))
-    return {str(r[0]) for r in found}
+    """Which of these event_ids are stored (``log_index``: the log has no index by id)."""
+    return log_index.existing_ids(conn, event_ids)
 
 
 def append(conn: Connection, records: Sequence[LogRecord], prev_hash: str) -> str:
@@ -228,13 +226,17 @@ def filtered(conn: Connection, query: Select[Any], where: RecordFilter, *,
         if not codes:
             return None
     if codes:
-        query = query.where(code_index.of_codes(codes))
+        query = query.where(log_index.of_codes(codes))
+    timed = where.since_ns is not None or where.until_ns is not None
+    if timed and not codes and where.from_seq is None and where.to_seq is None:
+        query = query.where(log_index.of_times(where.since_ns, where.until_ns))
+    else:  # a code's records or a seq range bound the read already
+        if where.since_ns is not None:
+            query = query.where(c.occurred_at_ns >= where.since_ns)
+        if where.until_ns is not None:
+            query = query.where(c.occurred_at_ns < where.until_ns)
     if where.source_id is not None:
         query = query.where(c.source_id == where.source_id)
-    if where.since_ns is not None:
-        query = query.where(c.occurred_at_ns >= where.since_ns)
-    if where.until_ns is not None:
-        query = query.where(c.occurred_at_ns < where.until_ns)
     if where.from_seq is not None:
         query = query.where(c.seq >= where.from_seq)
     if where.to_seq is not None:
@@ -249,14 +251,14 @@ def filtered(conn: Connection, query: Select[Any], where: RecordFilter, *,
 def matching_codes(conn: Connection, patterns: Sequence[str]) -> list[str]:
     """Exact codes as given plus the stored codes a glob matches (fnmatch, case-sensitive).
 
-    Globs are matched in Python against the distinct stored codes (``code_index``), so the
+    Globs are matched in Python against the distinct stored codes (``log_index``), so the
     records themselves are then selected by code through the index with a plain ``IN``.
     """
     found = {pattern for pattern in patterns if not is_glob(pattern)}
     globs = [pattern for pattern in patterns if is_glob(pattern)]
     if globs:
         prefix = _common_prefix([_literal_prefix(g) for g in globs])
-        found.update(code for code in code_index.distinct_codes(conn, prefix)
+        found.update(code for code in log_index.distinct_codes(conn, prefix)
                      if any(fnmatchcase(code, g) for g in globs))
     return sorted(found)
 

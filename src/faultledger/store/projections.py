@@ -16,7 +16,7 @@ from faultledger.domain.identity import LedgerIdentity
 from faultledger.domain.integrity import GENESIS_HASH, canonical_json
 from faultledger.domain.projector import Transition
 from faultledger.domain.types import FaultStatus
-from faultledger.store import code_index, fastpath
+from faultledger.store import fastpath, log_index
 from faultledger.store.dialects import bulk_load, upsert
 from faultledger.store.schema import (
     PROJECTION_CHECKPOINT,
@@ -144,7 +144,7 @@ def save(
     """Write what a batch changed and move the checkpoint, in the caller's transaction,
     with the log's index by code up to it."""
     dialect = conn.dialect.name
-    code_index.add(conn, load_checkpoint(conn).seq, checkpoint.seq)
+    log_index.add(conn, load_checkpoint(conn).seq, checkpoint.seq)
     fastpath.execute_many(conn, upsert(faults, dialect), [fault_row(f) for f in changed])
     fastpath.execute_many(conn, _INSERT_TRANSITION, [_transition_row(t) for t in new_transitions])
     fastpath.execute_many(conn, upsert(checkpoints, dialect),
@@ -161,7 +161,7 @@ def replace_all(
     """Drop the projections and write a full replay's result (``rebuild``)."""
     conn.execute(delete(faults))
     conn.execute(delete(transitions))
-    code_index.ensure_complete(conn, load_checkpoint(conn).seq)
+    log_index.ensure_complete(conn, load_checkpoint(conn).seq)
     with loading(conn):
         save(conn, all_faults, all_transitions, checkpoint)
 

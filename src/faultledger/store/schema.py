@@ -23,7 +23,7 @@ events = Table(
     "events",
     metadata,
     Column("seq", SeqType, primary_key=True, autoincrement=False),
-    Column("event_id", String(36), nullable=False, unique=True),
+    Column("event_id", String(36), nullable=False),
     Column("kind", String(40), nullable=False),
     Column("fault_code", String(128), nullable=True),
     Column("source_id", Text, nullable=True),
@@ -33,7 +33,10 @@ events = Table(
     Column("schema_version", Integer, nullable=False),
     Column("hash", String(64), nullable=False),
 )
-Index("ix_events_occurred_at", events.c.occurred_at_ns)
+"""The log: its one B-tree is the primary key, seq. Its indexes by code, time and event_id
+are tables of their own, kept with the projections (``events_by_*``, store/log_index.py);
+event_ids are unique because the writer checks them under the write lock (Alembic 0010
+dropped the UNIQUE constraint; ``verify`` checks)."""
 
 events_by_code = Table(
     "events_by_code",
@@ -51,8 +54,31 @@ the log grew past the page cache each of them was read back too: on a log of a m
 records eight reporters ran at 9,150 reports/s instead of 12,600 without it
 (docs/performance.md, "Eleventh round"). Written once per save (every 1,000 records at
 most), a code's leaf page takes all of its records since the last save at once. Reads by
-code take these seqs and the records after the checkpoint (``code_index.of_codes``); rows
+code take these seqs and the records after the checkpoint (``log_index.of_codes``); rows
 past the checkpoint (left by a checkpoint that moved back) are never read."""
+
+events_by_time = Table(
+    "events_by_time",
+    metadata,
+    Column("occurred_at_ns", BigInteger, primary_key=True, autoincrement=False),
+    Column("seq", BigInteger, primary_key=True, autoincrement=False),
+    sqlite_with_rowid=False,
+)
+"""The seqs of the records by ``occurred_at`` up to the checkpoint (Alembic 0010), for reads
+bounded by time: ``ix_events_occurred_at`` was one more page in every report's commit (one
+reporter: 5,306–5,529 against 5,603–5,792 reports/s without it, docs/performance.md,
+"Twelfth round")."""
+
+events_by_id = Table(
+    "events_by_id",
+    metadata,
+    Column("event_id", String(36), primary_key=True),
+    Column("seq", BigInteger, nullable=False),
+    sqlite_with_rowid=False,
+)
+"""The seq of each event_id up to the checkpoint (Alembic 0010): what the writer checks a
+repeated event_id against (``log_index.existing_ids``), instead of a UNIQUE index on
+``events`` written with every record."""
 
 faults = Table(
     "faults",

@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from faultledger import FaultLedger
-from faultledger.store import code_index, event_log
+from faultledger.store import event_log, log_index
 from faultledger.store.database import Database
 from faultledger.store.event_log import RecordFilter
 from tests.test_migrations import alembic_on, head, revision_of
@@ -113,7 +113,7 @@ def code_index_codes(path: Path) -> list[str]:
     database = Database(url(path), create=False)
     try:
         with database.reading() as conn:
-            return code_index.distinct_codes(conn)
+            return log_index.distinct_codes(conn)
     finally:
         database.dispose()
 
