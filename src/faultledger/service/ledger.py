@@ -99,13 +99,14 @@ class FaultLedger:
     """Event-sourced fault manager over one database. Thread-safe; use ``open`` to create."""
 
     def __init__(self, db: Database, projector: Projector, policy: Policy | None,
-                 max_batch: int, restored: Restored, robot_id: str | None = None) -> None:
+                 max_batch: int, restored: Restored, robot_id: str | None = None,
+                 serving: bool = False) -> None:
         self._db = db
         self._subscriptions: list[Subscription] = []
         self._subscriptions_lock = threading.Lock()
         self._writer = Writer(db, projector, policy, self._announce, max_batch,
                               robot_id=robot_id or default_robot_id(),
-                              expected_robot_id=robot_id)
+                              expected_robot_id=robot_id, serving=serving)
         self.restored = restored
         self.calendar: ShiftCalendar = default_calendar()
         """The shift calendar ``stats`` uses unless a call names another."""
@@ -124,9 +125,10 @@ class FaultLedger:
         """Open (create, migrate) the database and restore state: projections + log tail.
 
         With a ``policy`` this process is a serving writer: the policy is recorded when it
-        differs from the log's, HEALED faults it cannot heal become CLEARED, and a background
-        thread runs time-based confirmation. Without one, the log's own policy applies and
-        opening writes nothing (unless ``upgrade`` has a migration to run).
+        differs from the log's, HEALED faults it cannot heal become CLEARED, a background
+        thread runs time-based confirmation, and a new SQLite WAL is given its working size
+        at the first write (``background`` decides both when given). Without one, the log's
+        own policy applies and opening writes nothing (unless ``upgrade`` has a migration).
 
         ``robot_id`` is recorded in the log's identity by its first write (default: the host
         name). Given, a log that records another robot_id is refused
@@ -157,7 +159,8 @@ class FaultLedger:
             db.dispose()
             raise
         restored = Restored(events, len(projector.committed()), replayed)
-        ledger = cls(db, projector, policy, max_batch, restored, robot_id)
+        serving = background if background is not None else policy is not None
+        ledger = cls(db, projector, policy, max_batch, restored, robot_id, serving)
         if calendar is not None:
             ledger.calendar = calendar
         if estop_codes is not None:
@@ -166,7 +169,7 @@ class FaultLedger:
             if policy is not None:
                 ledger._writer.submit(RecordPolicy())
                 ledger._writer.submit(ReclassifyHealed(policy))
-            if background if background is not None else policy is not None:
+            if serving:
                 ledger._start_ticker()
         except BaseException:
             ledger.close()

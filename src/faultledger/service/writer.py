@@ -248,6 +248,7 @@ class Writer:
         *,
         robot_id: str,
         expected_robot_id: str | None = None,
+        serving: bool = False,
     ) -> None:
         self.db = db
         self.robot_id = robot_id
@@ -259,7 +260,7 @@ class Writer:
         self.desired_policy = desired_policy
         self.max_batch = max_batch
         self._announce = announce
-        self._connection = WriteConnection(db)
+        self._connection = WriteConnection(db, presize_wal=serving)
         self._queue: deque[_Pending] = deque()
         self._mutex = threading.Lock()
         self._arrived = threading.Condition(self._mutex)

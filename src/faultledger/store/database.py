@@ -16,7 +16,13 @@ from sqlalchemy import Connection, Engine, create_engine, exc
 from sqlalchemy.engine import make_url
 
 from faultledger.errors import NotADatabaseError, StoreError
-from faultledger.store.dialects import BUSY_TIMEOUT_MS, WRITE_LOCK, DialectRules, rules_for
+from faultledger.store.dialects import (
+    BUSY_TIMEOUT_MS,
+    WRITE_LOCK,
+    DialectRules,
+    presize_wal,
+    rules_for,
+)
 
 __all__ = ["BUSY_TIMEOUT_MS", "Database", "WriteConnection", "describe", "translate_errors"]
 
@@ -156,8 +162,11 @@ class Database:
 class WriteConnection:
     """The writer's long-lived connection: no pool checkout per group commit."""
 
-    def __init__(self, db: Database) -> None:
+    def __init__(self, db: Database, presize_wal: bool = False) -> None:
         self._db = db
+        self.presize_wal = presize_wal
+        """A serving writer's: give a new SQLite WAL its working size at the first write
+        (``dialects.presize_wal``); a one-shot writer's log need not pay 4 MiB for it."""
         self._conn: Connection | None = None
         self._driver: Any = None
         """SQLite: the driver connection whose transactions ``transaction`` runs."""
@@ -203,6 +212,8 @@ class WriteConnection:
             if self._db.dialect == "sqlite":
                 conn.begin()  # issues the first BEGIN IMMEDIATE (store/dialects.py)
                 self._driver = conn.connection.driver_connection
+                if self.presize_wal and not self.low_space and self._db.path is not None:
+                    presize_wal(self._db.path)  # under the write lock just taken
         return self._conn
 
     def _checkpoint_every(self, pages: int | None) -> None:
