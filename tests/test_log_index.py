@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from faultledger import FaultLedger
+from faultledger import FaultLedger, VerifyReport
 from faultledger.store import event_log, log_index
 from faultledger.store.database import Database
 from faultledger.store.event_log import RecordFilter
@@ -172,14 +172,19 @@ def test_verify_compares_the_index_with_the_log(tmp_path: Path, tamper: str, wor
     with FaultLedger.open(url(path)) as ledger:
         for i in range(8):
             ledger.report(CODES[i % 2], "FAILED", 2, "", "/arm")
+    result = verified_after(path, tamper)
+    assert not result.ok
+    assert any(words in problem for problem in result.problems), result.problems
+
+
+def verified_after(path: Path, tamper: str) -> VerifyReport:
+    """``verify`` of a log after one sqlite3 edit of it (checked whole before the edit)."""
     with FaultLedger.open(url(path)) as ledger:
         assert ledger.verify().ok
     with sqlite3.connect(path) as conn:
         conn.execute(tamper)
     with FaultLedger.open(url(path)) as ledger:
-        result = ledger.verify()
-    assert not result.ok
-    assert any(words in problem for problem in result.problems), result.problems
+        return ledger.verify()
 
 
 @pytest.mark.parametrize("tamper", [

@@ -33,7 +33,7 @@ from faultledger.service import audit
 from faultledger.store import event_log
 from faultledger.store.database import Database
 from faultledger.store.event_log import RecordFilter
-from tests.test_log_index import url
+from tests.test_log_index import url, verified_after
 from tests.test_migrations import alembic_on, head, revision_of
 
 CODES = ("ARM_OVERCURRENT", "BATTERY_LOW", "LIDAR_TIMEOUT")
@@ -419,12 +419,7 @@ def test_verify_compares_the_indexes_with_the_log(tmp_path: Path, tamper: str, w
                                                   ) -> None:
     path = tmp_path / "faults.db"
     ten_reports(path)
-    with FaultLedger.open(url(path)) as ledger:
-        assert ledger.verify().ok
-    with sqlite3.connect(path) as conn:
-        conn.execute(tamper)
-    with FaultLedger.open(url(path)) as ledger:
-        result = ledger.verify()
+    result = verified_after(path, tamper)
     assert not result.ok
     assert words in result.problems, result.problems
 
