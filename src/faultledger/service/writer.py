@@ -56,7 +56,7 @@ from faultledger.service import restore
 from faultledger.service.event_ids import new_event_id
 from faultledger.service.results import ClearResult, OperatorResult, ReportResult
 from faultledger.service.telemetry import Telemetry
-from faultledger.store import event_log, projections, stat_tables
+from faultledger.store import event_log, log_index, projections, stat_tables
 from faultledger.store.database import Database, WriteConnection, describe
 
 log = logging.getLogger(__name__)
@@ -277,6 +277,12 @@ class Writer:
         self._reclaim = False
         """Set by "disk full": checkpoint and truncate the WAL before the next commit."""
         self._saved_seq = projector.seq
+        self._recent_ids: dict[str, int] = {}
+        """event_id -> seq of every record after ``_ids_after`` (appended by this writer or
+        caught up with): with ``events_by_id`` up to the checkpoint, all a check of repeated
+        event_ids needs, without reading the records after the checkpoint."""
+        self._ids_after = projector.seq
+        """Restore saved what it replayed, so the records up to here are indexed."""
         """How far the saved projections go, as far as this writer knows (restore saved
         everything it replayed)."""
         self._unsaved_codes: set[str] = set()
@@ -484,7 +490,7 @@ class Writer:
                 ids = [p.command.event_id for p in group
                        if (isinstance(p.command, Report) and p.command.explicit_id)
                        or isinstance(p.command, RecordGoal)]
-                known = event_log.existing_event_ids(conn, ids)
+                known = self._known_ids(conn, ids)
                 for pending in group:
                     pending.result = self._build(pending.command, batch, known, conn)
                 head_hash = self._head[1]
@@ -501,6 +507,8 @@ class Writer:
         projector.commit()
         self._head = (projector.seq, head_hash)
         if saved or exclusive:  # (an exclusive action saved a whole replay: rebuild)
+            self._recent_ids.clear()  # all indexed now
+            self._ids_after = projector.seq
             self._unsaved_codes.clear()
             self._unsaved_transitions.clear()
             self._unsaved_since = None
@@ -508,6 +516,9 @@ class Writer:
                 self.projector.stats.take()
             self._saved_seq = self.projector.committed_seq
         elif projector.seq != self._saved_seq:
+            recent = self._recent_ids
+            for record in batch.records:
+                recent[record.event_id] = record.seq
             self._unsaved_codes.update(changed)
             self._unsaved_transitions.extend(batch.transitions)
             if self._unsaved_since is None:
@@ -537,6 +548,19 @@ class Writer:
             stat_tables.save(conn, projector.stats.peek(), projector.seq)
         if projector.identity is not None and projector.identity_seq > self._saved_seq:
             projections.save_identity(conn, projector.identity, projector.identity_seq)
+
+    def _known_ids(self, conn: Connection, ids: list[str]) -> set[str]:
+        """Which of these event_ids the log holds (under the write lock, after catching up):
+        those indexed, and those of the records after the checkpoint, from memory when this
+        writer saw all of them (the checkpoint is not behind what it last knew indexed),
+        else read from the log."""
+        if not ids:
+            return set()
+        indexed, saved = log_index.indexed_ids(conn, ids)
+        if saved < self._ids_after:  # moved back, or a save at open failed
+            return event_log.existing_event_ids(conn, ids)
+        recent = self._recent_ids
+        return indexed.union(event_id for event_id in ids if event_id in recent)
 
     def _check_identity(self) -> None:
         """Refuse to write into another robot's log (identified by another process since
@@ -575,6 +599,7 @@ class Writer:
                 "the database was replaced or truncated underneath; restart faultledger"
             )
         for record in event_log.read(conn, after_seq=projector.seq):
+            self._recent_ids[record.event_id] = record.seq  # committed by that process
             effect = projector.apply(record)
             if effect.transition is not None:
                 batch.transitions.append(effect.transition)

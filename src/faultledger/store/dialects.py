@@ -131,9 +131,9 @@ def presize_wal(database: Path) -> None:
     took 200-260 µs instead of 110 (docs/performance.md, "Twelfth round"). Zeros past the
     last frame are no frames to SQLite (a frame counts only with the header's salt and the
     running checksum), as PostgreSQL fills each WAL segment with zeros before using it.
-    Best effort: on an error (a full disk) the file is cut back to the size it had. SQLite holds no lock
-    on the -wal file (its locks are on the database and -shm files), so opening and closing
-    it here releases none of them."""
+    Best effort: on an error (a full disk) the file is cut back to the size it had. SQLite
+    holds no lock on the -wal file (its locks are on the database and -shm files), so
+    opening and closing it here releases none of them."""
     try:
         fd = os.open(database.with_name(database.name + "-wal"), os.O_WRONLY)
     except OSError:

@@ -13,20 +13,25 @@ commit writes one page per B-tree it touches (schema.events_by_code, docs/archit
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import lru_cache
 from typing import Any
 
 from sqlalchemy import (
     ColumnElement,
+    CompoundSelect,
     Connection,
     Table,
     and_,
+    bindparam,
     delete,
     func,
+    literal_column,
     select,
     union_all,
 )
 from sqlalchemy.dialects import postgresql, sqlite
 
+from faultledger.store import fastpath
 from faultledger.store.schema import (
     PROJECTION_CHECKPOINT,
     checkpoints,
@@ -91,6 +96,32 @@ def existing_ids(conn: Connection, event_ids: Sequence[str]) -> set[str]:
     recent = select(events.c.event_id).where(events.c.seq > saved,
                                              events.c.event_id.in_(wanted))
     return {str(event_id) for (event_id,) in conn.execute(union_all(indexed, recent))}
+
+
+def indexed_ids(conn: Connection, event_ids: Sequence[str]) -> tuple[set[str], int]:
+    """Which of these event_ids ``events_by_id`` holds, and the projections' checkpoint, in
+    one statement on the driver's cursor (the writer asks it for every group with explicit
+    event_ids): a writer that knows every record after the checkpoint (its own and those
+    it caught up with, ``service.writer``) need not read them. Any row counts, also one
+    past the checkpoint: rows are only ever added from records of the log."""
+    wanted = list(event_ids)
+    rows = fastpath.fetch_all(conn, _indexed_ids_statement(len(wanted)),
+                              {f"id{n}": event_id for n, event_id in enumerate(wanted)})
+    ids: set[str] = set()
+    saved = 0
+    for event_id, seq in rows:
+        if event_id is None:
+            saved = int(seq)
+        else:
+            ids.add(str(event_id))
+    return ids, saved
+
+
+@lru_cache(maxsize=64)
+def _indexed_ids_statement(count: int) -> CompoundSelect[Any]:
+    found = select(events_by_id.c.event_id, literal_column("-1")).where(
+        events_by_id.c.event_id.in_([bindparam(f"id{n}") for n in range(count)]))
+    return union_all(found, select(literal_column("NULL"), saved_seq()))
 
 
 _KEYS: tuple[tuple[Table, str], ...] = (
