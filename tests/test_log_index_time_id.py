@@ -308,6 +308,27 @@ def test_a_repeated_event_id_is_recognised_by_another_writer(tmp_path: Path) -> 
 
 
 # -- the upgrade ----------------------------------------------------------------------------------
+def test_a_repeated_event_id_is_recognised_when_the_checkpoint_is_behind_the_writer(
+        tmp_path: Path) -> None:
+    """A writer knows the ids of the records after the checkpoint it saved (its own, those
+    it caught up with). Should the checkpoint be behind that (moved back, or a save at open
+    that failed) and a record before it not indexed, the writer reads the log's tail."""
+    path = tmp_path / "faults.db"
+    early = str(uuid.uuid4())
+    with FaultLedger.open(url(path)) as ledger:
+        report(ledger, 9)
+        report(ledger, 8, early)
+    (early_seq,) = log_rows(path, "SELECT seq FROM events WHERE event_id = ?", early)[0]
+    with FaultLedger.open(url(path)) as ledger:  # everything before it is indexed at open
+        assert indexed_up_to(path, "events_by_id")[0] >= early_seq
+        with sqlite3.connect(path) as conn:  # as if that record had never been indexed
+            conn.execute("UPDATE checkpoints SET seq = ? WHERE name = 'projection'",
+                         (early_seq - 1,))
+            conn.execute("DELETE FROM events_by_id WHERE event_id = ?", (early,))
+        assert report(ledger, 7, early).duplicate
+    assert log_rows(path, "SELECT count(*) FROM events WHERE event_id = ?", early) == [(1,)]
+
+
 def test_the_upgrade_indexes_every_record_of_an_older_log(tmp_path: Path) -> None:
     """A 0009 log with records after its projections' checkpoint (as a crash leaves them) is
     upgraded on open: every record is indexed and kept exactly as it was."""
