@@ -260,7 +260,7 @@ class Writer:
         self.desired_policy = desired_policy
         self.max_batch = max_batch
         self._announce = announce
-        self._connection = WriteConnection(db, presize_wal=serving)
+        self._connection = WriteConnection(db, presize=serving)
         self._queue: deque[_Pending] = deque()
         self._mutex = threading.Lock()
         self._arrived = threading.Condition(self._mutex)
@@ -558,7 +558,7 @@ class Writer:
             return set()
         indexed, saved = log_index.indexed_ids(conn, ids)
         if saved < self._ids_after:  # moved back, or a save at open failed
-            return event_log.existing_event_ids(conn, ids)
+            return log_index.existing_ids(conn, ids)
         recent = self._recent_ids
         return indexed.union(event_id for event_id in ids if event_id in recent)
 

@@ -162,9 +162,9 @@ class Database:
 class WriteConnection:
     """The writer's long-lived connection: no pool checkout per group commit."""
 
-    def __init__(self, db: Database, presize_wal: bool = False) -> None:
+    def __init__(self, db: Database, presize: bool = False) -> None:
         self._db = db
-        self.presize_wal = presize_wal
+        self.presize = presize
         """A serving writer's: give a new SQLite WAL its working size at the first write
         (``dialects.presize_wal``); a one-shot writer's log need not pay 4 MiB for it."""
         self._conn: Connection | None = None
@@ -212,7 +212,7 @@ class WriteConnection:
             if self._db.dialect == "sqlite":
                 conn.begin()  # issues the first BEGIN IMMEDIATE (store/dialects.py)
                 self._driver = conn.connection.driver_connection
-                if self.presize_wal and not self.low_space and self._db.path is not None:
+                if self.presize and not self.low_space and self._db.path is not None:
                     presize_wal(self._db.path)  # under the write lock just taken
         return self._conn
 

@@ -42,11 +42,6 @@ def head(conn: Connection) -> tuple[int, str]:
     return (0, GENESIS_HASH) if row is None else (int(row[0]), str(row[1]))
 
 
-def existing_event_ids(conn: Connection, event_ids: Sequence[str]) -> set[str]:
-    """Which of these event_ids are stored (``log_index``: the log has no index by id)."""
-    return log_index.existing_ids(conn, event_ids)
-
-
 def append(conn: Connection, records: Sequence[LogRecord], prev_hash: str) -> str:
     """Insert records (seq already assigned, gap-free) chaining their hashes; returns the last."""
     rows: list[tuple[Any, ...]] = []

@@ -77,7 +77,7 @@ events_by_id = Table(
     sqlite_with_rowid=False,
 )
 """The seq of each event_id up to the checkpoint (Alembic 0010): what the writer checks a
-repeated event_id against (``log_index.existing_ids``), instead of a UNIQUE index on
+repeated event_id against (``log_index.indexed_ids``), instead of a UNIQUE index on
 ``events`` written with every record."""
 
 faults = Table(
