@@ -42,7 +42,7 @@ $(DEV_STAMP): pyproject.toml setup.py $(ROS_STAMP)
 
 # A compiled module's source changed since the install: compile again. (Meanwhile the checkout
 # runs the sources: faultledger/compiled.py drops compiled modules older than their source.)
-$(COMPILED_STAMP): $(COMPILED_SOURCES) | $(STAMP)
+$(COMPILED_STAMP): $(COMPILED_SOURCES) src/faultledger/compiled.py | $(STAMP)
 	@$(TIMED) "pip install -e . (compile the per-record modules again)" $(PIP) --no-deps -e .
 	@touch $(COMPILED_STAMP)
 

@@ -153,6 +153,8 @@ CREATE TABLE events (
 """
 
 
+RAW_INSERT = ("INSERT INTO events (seq, event_id, kind, fault_code, source_id, payload, "
+              "occurred_at_ns, recorded_at_ns, hash) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)")
 LOG_SCHEMA = RAW_SCHEMA.replace("event_id TEXT NOT NULL UNIQUE", "event_id TEXT NOT NULL")
 """The log's own B-trees: its table alone. Its indexes by code, time and event_id are written
 with the projections (``events_by_*``, Alembic 0009 and 0010), not with each record."""
@@ -169,8 +171,7 @@ def run_raw(work: Plan, db: Path, log_btrees: bool = False, fsync: bool = True) 
     sync = conn.execute("PRAGMA synchronous").fetchone()[0]
     assert mode == "wal" and sync == (2 if fsync else 0), (mode, sync)
     conn.execute(LOG_SCHEMA if log_btrees else RAW_SCHEMA)
-    insert = ("INSERT INTO events (seq, event_id, kind, fault_code, source_id, payload, "
-              "occurred_at_ns, recorded_at_ns, hash) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)")
+    insert = RAW_INSERT
     # Warm-up row outside the timing (the first commit also creates the WAL file).
     conn.execute(insert, (0, "warmup", "warmup", None, None, "{}", 0, 0, "0" * 64))
     prev = "0" * 64

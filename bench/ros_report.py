@@ -57,6 +57,8 @@ def start_server(kind: str, db: Path, log: Path) -> subprocess.Popen[str]:
         args = [sys.executable, str(BENCH_DIR / "_ros_echo_server.py")]
     elif kind == "shaped echo":
         args = [sys.executable, str(BENCH_DIR / "_ros_echo_server.py"), "shaped", str(db)]
+    elif kind == "raw commit":
+        args = [sys.executable, str(BENCH_DIR / "_ros_echo_server.py"), "committing", str(db)]
     else:
         args = [sys.executable, "-m", "faultledger.cli.main", "serve", "--db", url_for(db)]
     server = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=log.open("w"), text=True)
@@ -103,6 +105,7 @@ def run_clients(clients: int, calls: int, codes: int) -> Run:
 def measure(kind: str, clients: int, calls: int, codes: int, scratch: Path) -> Run:
     db = scratch / "faults.db"
     remove_db(db)
+    remove_db(scratch / "faults.db.raw")
     server = start_server(kind, db, scratch / f"{kind.replace(' ', '-')}.log")
     try:
         run_clients(clients, min(200, calls), codes)  # warm-up: discovery, page cache
@@ -140,16 +143,19 @@ def main() -> None:
         print(f"   raw durable commit (sqlite3, WAL, synchronous=FULL, one row): median "
               f"{commit_s * 1e3:.3f} ms", flush=True)
         for clients in (1, 4):
-            runs: dict[str, list[Run]] = {"echo": [], "shaped echo": [], "faultledger": []}
+            runs: dict[str, list[Run]] = {"echo": [], "shaped echo": [], "raw commit": [],
+                                          "faultledger": []}
             for _ in range(args.rounds):
                 for kind in runs:
                     runs[kind].append(measure(kind, clients, args.calls, args.codes, scratch))
             echo, ours = median_run(runs["echo"]), median_run(runs["faultledger"])
             shaped = median_run(runs["shaped echo"])
+            committing = median_run(runs["raw commit"])
             target = TARGET_SEQUENTIAL if clients == 1 else TARGET_FOUR
             share = ratio(ours.rate, echo.rate)
             print(f"-- {clients} client process(es)")
-            for name, run in (("echo", echo), ("shaped echo", shaped), ("faultledger", ours)):
+            for name, run in (("echo", echo), ("shaped echo", shaped),
+                              ("raw commit", committing), ("faultledger", ours)):
                 print(f"   {name:<12} {run.rate:8,.0f} calls/s   p50 {run.p50_ms:6.2f} ms   "
                       f"p99 {run.p99_ms:6.2f} ms   rejected {run.rejected}"
                       + (f"   LOST {run.lost} answers" if run.lost else ""))
@@ -158,6 +164,8 @@ def main() -> None:
                   f"(target >= {target:,.0f}/s: {verdict(ours.rate >= target)})")
             print(f"   information: {ratio(ours.rate, shaped.rate):.2f}x the shaped echo (the "
                   f"fault manager's own node, report_fault answering at once)")
+            print(f"   information: {ratio(ours.rate, committing.rate):.2f}x raw commit (the "
+                  f"same node answering after one raw sqlite3 durable commit, as ingest (a))")
             if clients == 1:
                 limit = 1 / (1 / echo.rate + commit_s)
                 print(f"   physical limit (echo round trip + one raw durable commit): "

@@ -190,19 +190,21 @@ class WriteConnection:
         its whole life, so statements run through it need no begin of their own; nothing else
         commits or rolls back on this connection, and an error drops it (rolling back)."""
         try:
-            with translate_errors(self._db.url):
-                conn = self._open()
-                if self._driver is None:
-                    with conn.begin():
-                        yield conn
-                else:
-                    if not self._driver.in_transaction:
-                        self._driver.execute("BEGIN IMMEDIATE")
+            conn = self._open()
+            if self._driver is None:
+                with conn.begin():
                     yield conn
-                    self._driver.commit()
-        except BaseException:
+            else:
+                if not self._driver.in_transaction:
+                    self._driver.execute("BEGIN IMMEDIATE")
+                yield conn
+                self._driver.execute("COMMIT")  # a cached statement; commit() parses it anew
+        except BaseException as error:
             self.close()
-            raise
+            translated = translated_error(self._db.url, error)
+            if translated is error:
+                raise
+            raise translated from None
 
     def _open(self) -> Connection:
         if self._conn is None:
@@ -334,9 +336,17 @@ def translate_errors(url: str) -> Iterator[None]:
     try:
         yield
     except Exception as error:
-        if isinstance(error, exc.DBAPIError | sqlite3.Error) or _is_driver_error(url, error):
-            raise classify(url, error) from None
-        raise
+        translated = translated_error(url, error)
+        if translated is error:
+            raise
+        raise translated from None
+
+
+def translated_error(url: str, error: BaseException) -> BaseException:
+    """A driver's exception as the StoreError ``translate_errors`` raises; any other, itself."""
+    if isinstance(error, exc.DBAPIError | sqlite3.Error) or _is_driver_error(url, error):
+        return classify(url, error)
+    return error
 
 
 def _is_driver_error(url: str, error: BaseException) -> bool:

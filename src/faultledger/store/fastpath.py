@@ -167,6 +167,17 @@ def _plain_insert(statement: ClauseElement) -> bool:
             and not statement._multi_values)
 
 
+def execute(conn: Connection, statement: ClauseElement,
+            params: Mapping[str, Any] | None = None) -> None:
+    """One statement that returns no rows (an ``INSERT ... SELECT``), compiled once."""
+    prepared = prepare(statement, conn.dialect)
+    cursor = _cursor(conn)
+    try:
+        cursor.execute(prepared.sql, prepared.params(params or {}))
+    finally:
+        cursor.close()
+
+
 def fetch_one(conn: Connection, statement: ClauseElement,
               params: Mapping[str, Any] | None = None) -> tuple[Any, ...] | None:
     prepared = prepare(statement, conn.dialect)

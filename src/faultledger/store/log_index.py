@@ -20,6 +20,7 @@ from sqlalchemy import (
     ColumnElement,
     CompoundSelect,
     Connection,
+    Insert,
     Table,
     and_,
     bindparam,
@@ -142,12 +143,23 @@ def add(conn: Connection, after: int, upto: int) -> None:
 
 
 def _fill(conn: Connection, index: Table, key: str, after: int, upto: int) -> None:
+    fastpath.execute(conn, _fill_statement(index, key, conn.dialect.name),
+                     {"after": after, "upto": upto})
+
+
+@lru_cache(maxsize=8)
+def _fill_statement(index: Table, key: str, dialect: str) -> Insert:
+    """Built and compiled once: every save runs these three (SQLAlchemy's building and
+    executing them cost more than SQLite's work on a save's thousand records)."""
     column = events.c[key]
     rows = (select(column, events.c.seq)
-            .where(events.c.seq > after, events.c.seq <= upto, column.is_not(None))
+            .where(events.c.seq > bindparam("after"), events.c.seq <= bindparam("upto"),
+                   column.is_not(None))
             .order_by(column, events.c.seq))  # appended in key order
-    module: Any = postgresql if conn.dialect.name == "postgresql" else sqlite
-    conn.execute(module.insert(index).from_select([key, "seq"], rows).on_conflict_do_nothing())
+    module: Any = postgresql if dialect == "postgresql" else sqlite
+    statement: Insert = (module.insert(index).from_select([key, "seq"], rows)
+                         .on_conflict_do_nothing())
+    return statement
 
 
 def ensure_complete(conn: Connection, upto: int) -> None:
