@@ -24,6 +24,7 @@ import hashlib
 import json
 import signal
 import sqlite3
+import statistics
 import sys
 import threading
 import time
@@ -63,6 +64,8 @@ class RawCommit:
         self.seq = 0
         self.prev = "0" * 64
         self.service: Any = None
+        self.commit_s: list[float] = []
+        """How long each COMMIT took inside the node (printed at exit)."""
 
     def __call__(self, request: ReportFault.Request,
                  response: ReportFault.Response) -> ReportFault.Response:
@@ -79,7 +82,9 @@ class RawCommit:
             self.conn.execute(RAW_INSERT, (self.seq, str(uuid.uuid4()), "fault_reported",
                                            r.fault_code, r.source_id, payload, now, now,
                                            self.prev))
+        started = time.perf_counter()
         self.conn.execute("COMMIT")
+        self.commit_s.append(time.perf_counter() - started)
         for _, header in queued:
             answer = ReportFault.Response()
             answer.accepted = True
@@ -97,10 +102,10 @@ def main() -> None:
     node = Node(NODE_NAME)
     ledger: FaultLedger | None = None
     manager: Any = None
+    callback: Any = echo
     if shaped:
         ledger = FaultLedger.open(f"sqlite:///{sys.argv[2]}")
         manager = FaultManagerNode(node, ledger)
-        callback: Any = echo
         if mode == "committing":
             callback = RawCommit(Path(f"{sys.argv[2]}.raw"))
             callback.service = manager.report_service
@@ -121,6 +126,8 @@ def main() -> None:
         if ledger is not None:
             ledger.close()
         try_shutdown()
+    if isinstance(callback, RawCommit) and callback.commit_s:
+        print(f"commit median {statistics.median(callback.commit_s) * 1e3:.4f} ms", flush=True)
 
 
 if __name__ == "__main__":

@@ -50,6 +50,8 @@ class Run:
     rejected: int
     lost: int = 0
     """Calls whose answer never came (the client gave up after ANSWER_TIMEOUT_S)."""
+    commit_ms: float | None = None
+    """The raw commit node's median COMMIT inside the node."""
 
 
 def start_server(kind: str, db: Path, log: Path) -> subprocess.Popen[str]:
@@ -69,13 +71,15 @@ def start_server(kind: str, db: Path, log: Path) -> subprocess.Popen[str]:
     raise SystemExit(f"{kind} server did not start; see {log}:\n{log.read_text()}")
 
 
-def stop_server(server: subprocess.Popen[str]) -> None:
+def stop_server(server: subprocess.Popen[str]) -> str:
+    """Stop the server; what it printed after its ready line."""
     server.send_signal(signal.SIGTERM)
     try:
-        server.wait(timeout=20)
+        out, _ = server.communicate(timeout=20)
     except subprocess.TimeoutExpired:
         server.kill()
-        server.wait()
+        out, _ = server.communicate()
+    return out or ""
 
 
 def run_clients(clients: int, calls: int, codes: int) -> Run:
@@ -109,15 +113,20 @@ def measure(kind: str, clients: int, calls: int, codes: int, scratch: Path) -> R
     server = start_server(kind, db, scratch / f"{kind.replace(' ', '-')}.log")
     try:
         run_clients(clients, min(200, calls), codes)  # warm-up: discovery, page cache
-        return run_clients(clients, calls, codes)
+        run = run_clients(clients, calls, codes)
     finally:
-        stop_server(server)
+        printed = stop_server(server)
+    for line in printed.splitlines():
+        if line.startswith("commit median "):
+            run.commit_ms = float(line.split()[2])
+    return run
 
 
 def median_run(runs: list[Run]) -> Run:
+    commits = [r.commit_ms for r in runs if r.commit_ms is not None]
     return Run(statistics.median(r.rate for r in runs), statistics.median(r.p50_ms for r in runs),
                statistics.median(r.p99_ms for r in runs), sum(r.rejected for r in runs),
-               sum(r.lost for r in runs))
+               sum(r.lost for r in runs), statistics.median(commits) if commits else None)
 
 
 def main() -> None:
@@ -166,6 +175,9 @@ def main() -> None:
                   f"fault manager's own node, report_fault answering at once)")
             print(f"   information: {ratio(ours.rate, committing.rate):.2f}x raw commit (the "
                   f"same node answering after one raw sqlite3 durable commit, as ingest (a))")
+            if committing.commit_ms is not None:
+                print(f"   information: raw commit's COMMIT inside the node: median "
+                      f"{committing.commit_ms:.3f} ms (alone, in a loop: {commit_s * 1e3:.3f} ms)")
             if clients == 1:
                 limit = 1 / (1 / echo.rate + commit_s)
                 print(f"   physical limit (echo round trip + one raw durable commit): "
