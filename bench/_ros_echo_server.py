@@ -20,15 +20,12 @@ report costs beyond raw sqlite3 inside ``serve``.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import signal
 import sqlite3
 import statistics
 import sys
 import threading
 import time
-import uuid
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +40,7 @@ from faultledger import FaultLedger
 from faultledger.ros.node import NODE_NAME, SERVICE_QOS, FaultManagerNode
 from faultledger.ros.serve import make_executor, spin_until
 from faultledger.ros.service_queue import take_queued
-from ingest import RAW_INSERT, RAW_SCHEMA
+from ingest import RAW_INSERT, RAW_SCHEMA, raw_row
 
 
 def echo(_request: ReportFault.Request, response: ReportFault.Response) -> ReportFault.Response:
@@ -73,15 +70,10 @@ class RawCommit:
         self.conn.execute("BEGIN IMMEDIATE")
         for r in [request, *(r for r, _ in queued)]:
             self.seq += 1
-            payload = json.dumps({"description": r.description, "event_type": r.event_type,
-                                  "fault_code": r.fault_code, "severity": r.severity,
-                                  "source_id": r.source_id},
-                                 sort_keys=True, separators=(",", ":"))
-            now = time.time_ns()
-            self.prev = hashlib.sha256(f"{self.prev}{self.seq}{payload}".encode()).hexdigest()
-            self.conn.execute(RAW_INSERT, (self.seq, str(uuid.uuid4()), "fault_reported",
-                                           r.fault_code, r.source_id, payload, now, now,
-                                           self.prev))
+            row = raw_row(self.seq, self.prev, r.fault_code, r.event_type, r.source_id,
+                          r.severity, r.description)
+            self.prev = row[-1]
+            self.conn.execute(RAW_INSERT, row)
         started = time.perf_counter()
         self.conn.execute("COMMIT")
         self.commit_s.append(time.perf_counter() - started)

@@ -160,6 +160,18 @@ LOG_SCHEMA = RAW_SCHEMA.replace("event_id TEXT NOT NULL UNIQUE", "event_id TEXT 
 with the projections (``events_by_*``, Alembic 0009 and 0010), not with each record."""
 
 
+def raw_row(seq: int, prev: str, code: str, kind: Any, source: str, severity: Any = 2,
+            description: str = "bench") -> tuple[Any, ...]:
+    """(a)'s row of one report (RAW_INSERT's parameters): the payload's JSON and a hash
+    chained on ``prev``, the row before's last value."""
+    payload = json.dumps({"description": description, "event_type": kind, "fault_code": code,
+                          "severity": severity, "source_id": source},
+                         sort_keys=True, separators=(",", ":"))
+    now = time.time_ns()
+    digest = hashlib.sha256(f"{prev}{seq}{payload}".encode()).hexdigest()
+    return (seq, str(uuid.uuid4()), "fault_reported", code, source, payload, now, now, digest)
+
+
 def run_raw(work: Plan, db: Path, log_btrees: bool = False, fsync: bool = True) -> Run:
     """(a): one INSERT and COMMIT per row into a table with the log's columns and unique
     event_id; ``log_btrees``: (a'), the same row into the log's one B-tree (no UNIQUE index),
@@ -180,14 +192,10 @@ def run_raw(work: Plan, db: Path, log_btrees: bool = False, fsync: bool = True) 
     start = time.perf_counter()
     for seq, (code, kind, source) in enumerate(work, 1):
         t0 = time.perf_counter()
-        payload = json.dumps({"description": "bench", "event_type": kind, "fault_code": code,
-                              "severity": 2, "source_id": source},
-                             sort_keys=True, separators=(",", ":"))
-        now = time.time_ns()
-        prev = hashlib.sha256(f"{prev}{seq}{payload}".encode()).hexdigest()
+        row = raw_row(seq, prev, code, kind, source)
+        prev = row[-1]
         conn.execute("BEGIN IMMEDIATE")
-        conn.execute(insert, (seq, str(uuid.uuid4()), "fault_reported", code, source, payload,
-                              now, now, prev))
+        conn.execute(insert, row)
         conn.execute("COMMIT")
         latencies.append(time.perf_counter() - t0)
     seconds = time.perf_counter() - start
