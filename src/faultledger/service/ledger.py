@@ -488,7 +488,7 @@ class FaultLedger:
                 upto = event_log.last_seq_recorded_by(conn, upto)
             projector = Projector()
             try:
-                apply_all(projector, event_log.read(conn, upto_seq=upto))
+                apply_all(projector, event_log.read_to_end(conn, upto_seq=upto))
             except UnreadableRecord as error:
                 raise DamagedDatabaseError(f"{error}: {DAMAGED}; restore a backup") from error
         return sorted(projector.committed(), key=lambda f: f.fault_code)

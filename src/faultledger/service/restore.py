@@ -72,12 +72,16 @@ def apply_all(projector: Projector, records: Iterable[LogRecord]) -> list[Transi
         raise
     except Exception as error:  # applying the record projector.seq failed
         raise UnreadableRecord(projector.seq, error) from error
+    finally:
+        close = getattr(reading, "close", None)
+        if close is not None:  # a streamed read ends before anything else runs on its connection
+            close()
 
 
 def replay(conn: Connection, upto: int | None = None) -> tuple[Projector, list[Transition]]:
     """A fresh projector (with statistics) over the log up to ``upto``, and its transitions."""
     projector = Projector(stats=StatsFold())
-    return projector, apply_all(projector, event_log.read(conn, upto_seq=upto))
+    return projector, apply_all(projector, event_log.read_to_end(conn, upto_seq=upto))
 
 
 def stats_of(projector: Projector) -> StatsFold:
@@ -159,7 +163,7 @@ def persist_tail(db: Database, projector: Projector) -> Projector:
         log.warning("projections lag the log and cannot be saved (%s); replaying in memory",
                     error)
         with db.reading() as conn:
-            apply_all(projector, event_log.read(conn, after_seq=projector.seq))
+            apply_all(projector, event_log.read_to_end(conn, after_seq=projector.seq))
         stats_of(projector).take()
     return projector
 
@@ -169,7 +173,7 @@ def _save_tail(conn: Connection, projector: Projector) -> None:
     and save what they changed, in the caller's write transaction."""
     identified = projector.identity is not None
     whole = projector.seq == 0  # nothing saved yet (a new schema): a bulk load
-    found = apply_all(projector, event_log.read(conn, after_seq=projector.seq))
+    found = apply_all(projector, event_log.read_to_end(conn, after_seq=projector.seq))
     with (projections.loading(conn) if whole else contextlib.nullcontext()):
         projections.save(conn, projector.staged_faults(), found,
                          projections.Checkpoint(*event_log.head(conn), projector.policy_seq))
@@ -209,7 +213,7 @@ def catch_up_statistics(db: Database, upto: int, stats_seq: int) -> StatsFold:
     them): fold the log up to the projections' seq and write them all."""
     with db.reading() as conn:
         replayed = Projector(stats=StatsFold())
-        apply_all(replayed, event_log.read(conn, upto_seq=upto))
+        apply_all(replayed, event_log.read_to_end(conn, upto_seq=upto))
     fold = stats_of(replayed)
     output = fold.take()
     log.info("statistics include seq %d of %d: computing them from the log", stats_seq, upto)

@@ -91,6 +91,9 @@ _CHUNK = bindparam("chunk", type_=Integer)
 _PAGE = select(events).where(events.c.seq > _AFTER).order_by(events.c.seq).limit(_CHUNK)
 _PAGE_UPTO = (select(events).where(events.c.seq > _AFTER, events.c.seq <= _UPTO)
               .order_by(events.c.seq).limit(_CHUNK))
+_ALL = select(events).where(events.c.seq > _AFTER).order_by(events.c.seq)
+_ALL_UPTO = (select(events).where(events.c.seq > _AFTER, events.c.seq <= _UPTO)
+             .order_by(events.c.seq))
 
 
 def _rows(conn: Connection, after: int = 0, upto: int | None = None) -> Iterator[tuple[Any, ...]]:
@@ -108,6 +111,20 @@ def _rows(conn: Connection, after: int = 0, upto: int | None = None) -> Iterator
 def read(conn: Connection, after_seq: int = 0, upto_seq: int | None = None) -> Iterator[LogRecord]:
     for row in _rows(conn, after_seq, upto_seq):
         yield _to_record(row)
+
+
+def read_to_end(conn: Connection, after_seq: int = 0,
+                upto_seq: int | None = None) -> Iterator[LogRecord]:
+    """``read`` for a replay that applies every record it is given: one statement whose
+    rows come while the replay works (``fastpath.stream``), where ``read`` asks page by page.
+    Nothing else may run on ``conn`` until the last record."""
+    statement = _ALL if upto_seq is None else _ALL_UPTO
+    rows = fastpath.stream(conn, statement, {"after": after_seq, "upto": upto_seq}, READ_CHUNK)
+    try:
+        for row in rows:
+            yield _to_record(row)
+    finally:
+        rows.close()  # now, also when a record cannot be read: the connection is free again
 
 
 GLOB_CHARACTERS = "*?["
