@@ -91,8 +91,9 @@ def test_an_edited_record_is_refused_by_seq_and_nothing_is_stored(
     url = robot_log(path, "robot-a", 30)
     robot_id, ledger_id, records = records_of(url)
     with sqlite3.connect(path) as conn:  # an edit on the robot before it was pushed
-        conn.execute("UPDATE events SET payload = replace(payload, 'd17', 'dXX') "
-                     "WHERE payload LIKE '%d17%'")
+        # The whole quoted value: a bare d17 can be part of the identity record's ledger_id.
+        conn.execute("UPDATE events SET payload = replace(payload, '\"d17\"', '\"dXX\"') "
+                     "WHERE payload LIKE '%\"d17\"%'")
     _, _, edited = records_of(url)
     bad = next(r for r in edited if "dXX" in r.payload)
     with pytest.raises(BatchError) as refused:
