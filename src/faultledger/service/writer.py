@@ -277,14 +277,14 @@ class Writer:
         self._reclaim = False
         """Set by "disk full": checkpoint and truncate the WAL before the next commit."""
         self._saved_seq = projector.seq
+        """How far the saved projections go, as far as this writer knows (restore saved
+        everything it replayed)."""
         self._recent_ids: dict[str, int] = {}
         """event_id -> seq of every record after ``_ids_after`` (appended by this writer or
         caught up with): with ``events_by_id`` up to the checkpoint, all a check of repeated
         event_ids needs, without reading the records after the checkpoint."""
         self._ids_after = projector.seq
         """Restore saved what it replayed, so the records up to here are indexed."""
-        """How far the saved projections go, as far as this writer knows (restore saved
-        everything it replayed)."""
         self._unsaved_codes: set[str] = set()
         self._unsaved_transitions: list[Transition] = []
         self._unsaved_since: float | None = None

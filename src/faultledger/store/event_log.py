@@ -88,12 +88,10 @@ def _to_record(row: Sequence[Any]) -> LogRecord:
 _AFTER = bindparam("after", type_=Integer)
 _UPTO = bindparam("upto", type_=Integer)
 _CHUNK = bindparam("chunk", type_=Integer)
-_PAGE = select(events).where(events.c.seq > _AFTER).order_by(events.c.seq).limit(_CHUNK)
-_PAGE_UPTO = (select(events).where(events.c.seq > _AFTER, events.c.seq <= _UPTO)
-              .order_by(events.c.seq).limit(_CHUNK))
 _ALL = select(events).where(events.c.seq > _AFTER).order_by(events.c.seq)
-_ALL_UPTO = (select(events).where(events.c.seq > _AFTER, events.c.seq <= _UPTO)
-             .order_by(events.c.seq))
+_ALL_UPTO = _ALL.where(events.c.seq <= _UPTO)
+_PAGE = _ALL.limit(_CHUNK)
+_PAGE_UPTO = _ALL_UPTO.limit(_CHUNK)
 
 
 def _rows(conn: Connection, after: int = 0, upto: int | None = None) -> Iterator[tuple[Any, ...]]:
