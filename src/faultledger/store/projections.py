@@ -112,8 +112,8 @@ _LOAD_CHECKPOINT = select(checkpoints.c.seq, checkpoints.c.hash, checkpoints.c.p
 
 
 def load_checkpoint(conn: Connection) -> Checkpoint:
-    """Read twice by every save (``fastpath``: built through SQLAlchemy it took more time
-    than the rest of a save's checks together)."""
+    """Read twice by every save, on the driver's cursor (``fastpath``): built and run
+    through SQLAlchemy, one read inside a save took about 0.25 ms, on the cursor 0.015."""
     rows = fastpath.fetch_all(conn, _LOAD_CHECKPOINT, {"name": CHECKPOINT})
     if not rows:
         return Checkpoint(0, GENESIS_HASH)
