@@ -21,11 +21,9 @@ round"); no target here.
 from __future__ import annotations
 
 import argparse
-import sqlite3
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from _common import header, plan, scratch_dir, url_for
 from faultledger import FaultLedger, Policy
@@ -36,7 +34,7 @@ from faultledger.service.commands import report_command
 from faultledger.service.requests import ReportRequest
 from faultledger.store import event_log
 from faultledger.store.database import Database
-from ingest import RAW_INSERT, RAW_SCHEMA, Plan, raw_row
+from ingest import Plan, cpu_us, raw_row, run_raw
 
 
 def best_us(rounds: int, count: int, run: Callable[[], object]) -> float:
@@ -105,34 +103,18 @@ def ledger_parts(work: Plan, rounds: int, db: Path) -> dict[str, float]:
     return parts
 
 
-def raw_parts(work: Plan, rounds: int, db: Path) -> dict[str, float]:
-    """CPU per row of raw sqlite3's (a) at synchronous=OFF: the whole row, and its SQL."""
-    conn = sqlite3.connect(db, isolation_level=None)
-    conn.execute("PRAGMA journal_mode = WAL")
-    conn.execute("PRAGMA synchronous = OFF")
-    conn.execute(RAW_SCHEMA)
-    seq, prev = 0, "0" * 64
+def raw_parts(work: Plan, rounds: int, scratch: Path) -> dict[str, float]:
+    """CPU per row of raw sqlite3's (a) at synchronous=OFF (``ingest.run_raw``): the whole
+    row, and building it (JSON, hash, ``uuid4``) without its SQL."""
+    whole = min(cpu_us(run_raw(work, scratch / f"raw-{n}.db", fsync=False))
+                for n in range(rounds))
 
-    def rows() -> list[tuple[Any, ...]]:
-        nonlocal seq, prev
-        built = []
-        for code, kind, source in work:
-            seq += 1
-            row = raw_row(seq, prev, code, kind, source)
-            prev = row[-1]
-            built.append(row)
-        return built
+    def rows() -> None:
+        prev = "0" * 64
+        for seq, (code, kind, source) in enumerate(work, 1):
+            prev = raw_row(seq, prev, code, kind, source)[-1]
 
-    def whole() -> None:
-        for row in rows():
-            conn.execute("BEGIN IMMEDIATE")
-            conn.execute(RAW_INSERT, row)
-            conn.execute("COMMIT")
-
-    parts = {"whole": best_us(rounds, len(work), whole)}
-    parts["row"] = best_us(rounds, len(work), rows)
-    conn.close()
-    return parts
+    return {"whole": whole, "row": best_us(rounds, len(work), rows)}
 
 
 def main() -> None:
@@ -145,7 +127,7 @@ def main() -> None:
     work = plan(args.reports, 200)
     with scratch_dir("parts-") as scratch:
         ours = ledger_parts(work, args.rounds, scratch / "ledger.db")
-        raw = raw_parts(work, args.rounds, scratch / "raw.db")
+        raw = raw_parts(work, args.rounds, scratch)
     saves = ours["whole"] - ours["unsaved"]
     hand_off = ours["empty commit"] - ours["transaction SQL"]
     record = ours["unsaved"] - ours["command"] - ours["empty commit"] - ours["apply"]
